@@ -1,0 +1,108 @@
+"""The fat frame: the one map between lattice coordinates u and space x.
+
+Todd (1985) maps the Freudenthal/Kuhn triangulation of the integer grid by
+``A = I - (n + 1 + sqrt(n + 1))^-1 e e^T``; for n = 3 that is ``A = I - e e^T / 6``
+(formula (1) of the seed paper; its printed matrix has the sign of the
+off-diagonal entries wrong).  Every image tet is congruent, 3r/R = 3 sqrt(2/5),
+dihedral angles 60 and 90 degrees.  One more rotation ``R`` turns the mapped grid
+into the body-centred-cubic (BCC) lattice of Labelle & Shewchuk (2007): the
+axis-aligned cube grid of edge ``h`` plus the cube centres.  Then
+
+    x = origin + h * R A u,    R A = LATTICE_TO_SPACE = 1/2 [[1, 1, -1], [-1, 1, 1], [1, -1, 1]]
+    u = SPACE_TO_LATTICE (x - origin) / h,  SPACE_TO_LATTICE = [[1, 0, 1], [1, 1, 0], [0, 1, 1]]
+
+Long tet edges (u-directions e_i + e_j) have length h and point along the x, z
+and y axes; short edges (e_i and e_1 + e_2 + e_3) have length h sqrt(3)/2.
+``h`` is the user's ``size``: the long edge at the finest octree level.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+TODD_A = np.eye(3) - np.ones((3, 3)) / 6.0
+LATTICE_TO_SPACE = 0.5 * np.array([[1.0, 1.0, -1.0], [-1.0, 1.0, 1.0], [1.0, -1.0, 1.0]])
+SPACE_TO_LATTICE = np.array([[1, 0, 1], [1, 1, 0], [0, 1, 1]], dtype=np.int64)
+ROTATION = LATTICE_TO_SPACE @ np.linalg.inv(TODD_A)
+
+#: The seven edge directions of the Freudenthal triangulation, shape (7, 3) int64.
+EDGE_DIRECTIONS = np.array(
+    [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1]], dtype=np.int64
+)
+#: True for the three long directions (e_i + e_j, length h), False for the short ones.
+EDGE_IS_LONG = np.array([False, False, False, True, True, True, False])
+#: Index into EDGE_DIRECTIONS of the direction that maps to the +x axis.
+X_AXIS_DIRECTION = 3
+
+#: Corner c of a lattice cube sits at u = (c & 1, (c >> 1) & 1, (c >> 2) & 1).
+CUBE_CORNERS = np.array([[(c >> i) & 1 for i in range(3)] for c in range(8)], dtype=np.int64)
+#: The six Freudenthal tets of a cube (0, e_p1, e_p1 + e_p2, e for the permutations p),
+#: as corner indices, each ordered to have positive volume in space.
+FREUDENTHAL_TETS = np.array(
+    [[0, 1, 3, 7], [0, 5, 1, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 6, 4, 7]], dtype=np.int64
+)
+
+
+def row_basis(direction: int) -> np.ndarray:
+    """Unimodular integer matrix T (3, 3) with ``T @ EDGE_DIRECTIONS[direction] = e_1``.
+
+    Lattice lines parallel to an edge direction d become the rows {(t, p2, p3)} of the
+    integer grid: ``T @ u`` gives the position t along the line and the row (p2, p3).
+    Rows of T have entries in {-1, 0, 1}, so |T u| <= 2 max|u|.
+    """
+    d = EDGE_DIRECTIONS[direction]
+    first = int(np.argmax(d))  # a coordinate where d is 1
+    T = np.zeros((3, 3), dtype=np.int64)
+    T[0, first] = 1
+    others = [i for i in range(3) if i != first]
+    for r, i in enumerate(others, start=1):
+        T[r, i] = 1
+        T[r, first] = -d[i]
+    if round(np.linalg.det(T)) < 0:
+        T[[1, 2]] = T[[2, 1]]
+    return T
+
+
+@dataclass(frozen=True)
+class FatFrame:
+    """Placement of the fat lattice in space.
+
+    origin: (3,) float64, the space point of u = 0.
+    h: float, long edge length at the finest level (the requested size), in model units.
+    levels: int, the finest octree level; the root cube is [0, 2**levels)^3 in u.
+    """
+
+    origin: np.ndarray
+    h: float
+    levels: int
+
+    def to_space(self, u: np.ndarray) -> np.ndarray:
+        """Space points (N, 3) float64 of lattice points u (N, 3), any real dtype."""
+        return self.origin + self.h * (np.asarray(u, dtype=np.float64) @ LATTICE_TO_SPACE.T)
+
+    def to_lattice(self, x: np.ndarray) -> np.ndarray:
+        """Lattice coordinates (N, 3) float64 of space points x (N, 3)."""
+        return ((np.asarray(x, dtype=np.float64) - self.origin) / self.h) @ SPACE_TO_LATTICE.T.astype(np.float64)
+
+
+#: Lattice offset of the solid's bounding box from the root cube's corner, in units of h.
+#: Non-dyadic so that CAD faces at round coordinates rarely pass exactly through lattice points.
+_BOX_MARGIN = 1.1909830056250525
+
+
+def fat_frame(bbox_min: np.ndarray, bbox_max: np.ndarray, size: float) -> FatFrame:
+    """The frame of long edge ``size`` whose root cube holds the box with a margin.
+
+    The box corner nearest the origin sits at u = 2 * _BOX_MARGIN, so at least two
+    lattice layers lie outside the solid on every side.
+    """
+    bbox_min = np.asarray(bbox_min, dtype=np.float64)
+    bbox_max = np.asarray(bbox_max, dtype=np.float64)
+    origin = bbox_min - _BOX_MARGIN * size
+    # Every u_i is a sum of two x components, each spanning at most (extent + 2 margin) / h.
+    span = (bbox_max - bbox_min) / size + 2 * _BOX_MARGIN
+    u_extent = max(span[0] + span[2], span[0] + span[1], span[1] + span[2])
+    levels = max(1, int(np.ceil(np.log2(u_extent + 2.0))))
+    return FatFrame(origin=origin, h=float(size), levels=levels)

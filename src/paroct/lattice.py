@@ -1,0 +1,108 @@
+"""Emit the Freudenthal tets of octree leaves with globally numbered lattice vertices.
+
+Vertices are identified by the Morton key of their lattice coordinates and numbered
+in the order leaves first touch them (leaves in Morton order), so the numbering is
+deterministic and spatially coherent.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .frame import CUBE_CORNERS, FREUDENTHAL_TETS
+from .octant import morton_key
+
+_EMPTY = np.int64(-1)
+_FIB = np.uint64(0x9E3779B97F4A7C15)
+
+
+@nb.njit(cache=True, inline="always")
+def _slot(key, bits):
+    return np.int64((np.uint64(key) * _FIB) >> np.uint64(64 - bits))
+
+
+@nb.njit(cache=True)
+def _insert(table_keys, table_vals, bits, key, next_id):
+    """Open-addressing insert; returns (id of key, whether it was new)."""
+    mask = (np.int64(1) << bits) - 1
+    s = _slot(key, bits)
+    while True:
+        k = table_keys[s]
+        if k == key:
+            return table_vals[s], False
+        if k == _EMPTY:
+            table_keys[s] = key
+            table_vals[s] = next_id
+            return next_id, True
+        s = (s + 1) & mask
+
+
+@nb.njit(cache=True)
+def _number_corners(anchors, sides):
+    """Vertex ids (L, 8) int32 of leaf corners and the lattice coordinates (V, 3) of the vertices."""
+    n = anchors.shape[0]
+    bits = 4
+    while (np.int64(1) << bits) < 4 * n + 16:
+        bits += 1
+    table_keys = np.full(np.int64(1) << bits, _EMPTY, dtype=np.int64)
+    table_vals = np.empty(np.int64(1) << bits, dtype=np.int32)
+    corner_ids = np.empty((n, 8), dtype=np.int32)
+    coords = np.empty((4 * n + 16, 3), dtype=np.int64)
+    count = 0
+    for i in range(n):
+        for c in range(8):
+            x = anchors[i, 0] + sides[i] * CUBE_CORNERS[c, 0]
+            y = anchors[i, 1] + sides[i] * CUBE_CORNERS[c, 1]
+            z = anchors[i, 2] + sides[i] * CUBE_CORNERS[c, 2]
+            vid, new = _insert(table_keys, table_vals, bits, morton_key(x, y, z), count)
+            if new:
+                if count == coords.shape[0]:
+                    grown = np.empty((2 * count, 3), dtype=np.int64)
+                    grown[:count] = coords
+                    coords = grown
+                coords[count, 0] = x
+                coords[count, 1] = y
+                coords[count, 2] = z
+                count += 1
+                if 2 * count > table_keys.shape[0]:
+                    table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
+            corner_ids[i, c] = vid
+    return corner_ids, coords[:count].copy()
+
+
+@nb.njit(cache=True)
+def _rehash(table_keys, table_vals, bits):
+    new_bits = bits + 1
+    new_keys = np.full(np.int64(1) << new_bits, _EMPTY, dtype=np.int64)
+    new_vals = np.empty(np.int64(1) << new_bits, dtype=np.int32)
+    for s in range(table_keys.shape[0]):
+        if table_keys[s] != _EMPTY:
+            _insert(new_keys, new_vals, new_bits, table_keys[s], table_vals[s])
+    return new_keys, new_vals, new_bits
+
+
+@nb.njit(cache=True)
+def _freudenthal_tets(corner_ids):
+    n = corner_ids.shape[0]
+    tets = np.empty((6 * n, 4), dtype=np.int32)
+    for i in range(n):
+        for t in range(6):
+            for k in range(4):
+                tets[6 * i + t, k] = corner_ids[i, FREUDENTHAL_TETS[t, k]]
+    return tets
+
+
+def leaf_tets(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The six positively oriented Freudenthal tets of every leaf.
+
+    anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides.
+    Returns (vertex_coords (V, 3) int64 lattice units, tets (6L, 4) int32), tets 6i..6i+5
+    belonging to leaf i.
+    """
+    anchors = np.ascontiguousarray(anchors, dtype=np.int64)
+    sides = np.ascontiguousarray(sides, dtype=np.int64)
+    if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
+        raise ValueError(f"anchors.shape = {anchors.shape}, sides.shape = {sides.shape}; expected (L, 3) and (L,)")
+    corner_ids, coords = _number_corners(anchors, sides)
+    return coords, _freudenthal_tets(corner_ids)

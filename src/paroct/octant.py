@@ -1,0 +1,127 @@
+"""Single-octant bit functions (the layer of p4est's p8est_bits.h).
+
+An octant is an anchor (its minimum corner, integer coordinates in [0, 2**MAX_LEVEL))
+and a level; its side is ``2**(MAX_LEVEL - level)``.  The root cube is level 0.
+Octants are named by the Morton key of their anchor (bits interleaved x, y, z from
+the lowest bit up); sorting by (key, level) puts every octant after its ancestors
+and before its descendants, and a linear octree is a sorted array of such keys.
+
+Coordinates here are octree coordinates; a frame with ``levels`` finest levels
+turns them into lattice units by ``>> (MAX_LEVEL - levels)``.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+#: Deepest level; anchors fit in MAX_LEVEL bits, Morton keys in 3 * MAX_LEVEL bits.
+MAX_LEVEL = 19
+#: Largest coordinate a Morton key can hold (vertices of the root cube reach 2**MAX_LEVEL).
+KEY_BITS_PER_AXIS = 21
+
+
+@nb.njit(cache=True, inline="always")
+def _spread_bits(v):
+    """Insert two zero bits above each of the low 21 bits of v."""
+    v = v & 0x1FFFFF
+    v = (v | (v << 32)) & 0x1F00000000FFFF
+    v = (v | (v << 16)) & 0x1F0000FF0000FF
+    v = (v | (v << 8)) & 0x100F00F00F00F00F
+    v = (v | (v << 4)) & 0x10C30C30C30C30C3
+    v = (v | (v << 2)) & 0x1249249249249249
+    return v
+
+
+@nb.njit(cache=True, inline="always")
+def _compact_bits(v):
+    """Inverse of _spread_bits: gather every third bit of v."""
+    v = v & 0x1249249249249249
+    v = (v ^ (v >> 2)) & 0x10C30C30C30C30C3
+    v = (v ^ (v >> 4)) & 0x100F00F00F00F00F
+    v = (v ^ (v >> 8)) & 0x1F0000FF0000FF
+    v = (v ^ (v >> 16)) & 0x1F00000000FFFF
+    v = (v ^ (v >> 32)) & 0x1FFFFF
+    return v
+
+
+@nb.njit(cache=True, inline="always")
+def morton_key(x, y, z):
+    """Morton key of integer coordinates 0 <= x, y, z < 2**21: bit i of x goes to bit 3i."""
+    return _spread_bits(np.int64(x)) | (_spread_bits(np.int64(y)) << 1) | (_spread_bits(np.int64(z)) << 2)
+
+
+@nb.njit(cache=True, inline="always")
+def morton_coords(key):
+    """Coordinates (x, y, z) of a Morton key; inverse of morton_key."""
+    return _compact_bits(key), _compact_bits(key >> 1), _compact_bits(key >> 2)
+
+
+@nb.njit(cache=True, inline="always")
+def octant_len(level):
+    """Side of an octant of ``level`` in octree coordinates: 2**(MAX_LEVEL - level)."""
+    return np.int64(1) << (MAX_LEVEL - level)
+
+
+@nb.njit(cache=True, inline="always")
+def octant_last_key(key, level):
+    """Key of the last finest-level descendant of the octant: all its key bits below the level set."""
+    return key | ((np.int64(1) << (3 * (MAX_LEVEL - level))) - 1)
+
+
+@nb.njit(cache=True, inline="always")
+def octant_parent_key(key, level):
+    """Anchor key of the parent of an octant at ``level`` >= 1 (the parent is at level - 1)."""
+    return key & ~((np.int64(1) << (3 * (MAX_LEVEL - level + 1))) - 1)
+
+
+@nb.njit(cache=True, inline="always")
+def octant_child_id(key, level):
+    """Which child (0..7, bits x | y << 1 | z << 2) of its parent an octant at ``level`` >= 1 is."""
+    return (key >> (3 * (MAX_LEVEL - level))) & 7
+
+
+@nb.njit(cache=True, inline="always")
+def octant_is_ancestor(key_a, level_a, key_b, level_b):
+    """True iff octant a is a strict ancestor of octant b: a is coarser and contains b."""
+    if level_a >= level_b:
+        return False
+    shift = 3 * (MAX_LEVEL - level_a)
+    return (key_a >> shift) == (key_b >> shift)
+
+
+@nb.njit(cache=True, inline="always")
+def octant_overlaps(key_a, level_a, key_b, level_b):
+    """True iff octants a and b share interior: one equals or contains the other."""
+    shift = 3 * (MAX_LEVEL - min(level_a, level_b))
+    return (key_a >> shift) == (key_b >> shift)
+
+
+@nb.njit(cache=True, inline="always")
+def octant_is_inside_root(x, y, z):
+    """True iff the anchor (x, y, z) lies in the root cube [0, 2**MAX_LEVEL)^3."""
+    n = np.int64(1) << MAX_LEVEL
+    return 0 <= x < n and 0 <= y < n and 0 <= z < n
+
+
+@nb.njit(cache=True)
+def morton_keys(coords):
+    """Morton keys (N,) int64 of integer coordinates (N, 3)."""
+    n = coords.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        out[i] = morton_key(coords[i, 0], coords[i, 1], coords[i, 2])
+    return out
+
+
+@nb.njit(cache=True)
+def morton_decode(keys):
+    """Integer coordinates (N, 3) int64 of Morton keys (N,); inverse of morton_keys."""
+    n = keys.shape[0]
+    out = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        x, y, z = morton_coords(keys[i])
+        out[i, 0] = x
+        out[i, 1] = y
+        out[i, 2] = z
+    return out

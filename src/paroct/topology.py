@@ -1,0 +1,254 @@
+"""Derived topology of tet meshes: face matching, boundary surface, manifoldness, genus.
+
+Pure functions over (tets (M, 4) int) arrays.  Faces are matched with an open-addressing
+hash table on sorted vertex triples, so there is no limit on the vertex count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+#: Face k of a positively oriented tet is opposite vertex k, ordered to face outward.
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
+
+_FIB = np.uint64(0x9E3779B97F4A7C15)
+
+
+@nb.njit(cache=True, inline="always")
+def _sort3(a, b, c):
+    if a > b:
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    return a, b, c
+
+
+@nb.njit(cache=True, inline="always")
+def _hash3(a, b, c, bits):
+    h = np.uint64(a) * _FIB
+    h = (h ^ np.uint64(b)) * _FIB
+    h = (h ^ np.uint64(c)) * _FIB
+    return np.int64(h >> np.uint64(64 - bits))
+
+
+@nb.njit(cache=True)
+def match_faces(tets):
+    """Neighbour across every tet face.
+
+    Returns (neighbour (M, 4) int64: the tet sharing face k of tet t, or -1 on the boundary;
+    overloaded: number of faces found in more than two tets; same_side: number of faces
+    whose two tets order them the same way, i.e. lie on the same side, inverted).
+    """
+    m = tets.shape[0]
+    bits = 4
+    while (np.int64(1) << bits) < 8 * m + 16:
+        bits += 1
+    size = np.int64(1) << bits
+    mask = size - 1
+    ta = np.full(size, -1, dtype=np.int64)
+    tb = np.empty(size, dtype=np.int64)
+    tc = np.empty(size, dtype=np.int64)
+    owner = np.empty(size, dtype=np.int64)  # tet * 4 + face of the first tet holding it
+    neighbour = np.full((m, 4), -1, dtype=np.int64)
+    overloaded = 0
+    same_side = 0
+    for t in range(m):
+        for k in range(4):
+            v0 = tets[t, TET_FACES[k, 0]]
+            v1 = tets[t, TET_FACES[k, 1]]
+            v2 = tets[t, TET_FACES[k, 2]]
+            a, b, c = _sort3(v0, v1, v2)
+            s = _hash3(a, b, c, bits)
+            while True:
+                if ta[s] == -1:
+                    ta[s] = a
+                    tb[s] = b
+                    tc[s] = c
+                    owner[s] = t * 4 + k
+                    break
+                if ta[s] == a and tb[s] == b and tc[s] == c:
+                    o = owner[s]
+                    if o < 0:
+                        overloaded += 1
+                        break
+                    ot = o // 4
+                    ok = o % 4
+                    if neighbour[ot, ok] != -1:
+                        overloaded += 1
+                        owner[s] = -1
+                        break
+                    neighbour[ot, ok] = t
+                    neighbour[t, k] = ot
+                    # Opposite orientation means the cyclic order of the two faces is reversed.
+                    w0 = tets[ot, TET_FACES[ok, 0]]
+                    w1 = tets[ot, TET_FACES[ok, 1]]
+                    w2 = tets[ot, TET_FACES[ok, 2]]
+                    if (w0 == v0 and w1 == v1) or (w1 == v0 and w2 == v1) or (w2 == v0 and w0 == v1):
+                        same_side += 1
+                    break
+                s = (s + 1) & mask
+    return neighbour, overloaded, same_side
+
+
+def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
+    """Boundary triangles (B, 3), oriented outward, of tets with the given face neighbours."""
+    t, k = np.nonzero(neighbour < 0)
+    return tets[t[:, None], TET_FACES[k]]
+
+
+@nb.njit(cache=True)
+def _surface_edges(faces, n_vertices):
+    """Per directed half-edge of faces: partner count checks and vertex link counts."""
+    nf = faces.shape[0]
+    bits = 4
+    while (np.int64(1) << bits) < 6 * nf + 16:
+        bits += 1
+    size = np.int64(1) << bits
+    mask = size - 1
+    ka = np.full(size, -1, dtype=np.int64)
+    kb = np.empty(size, dtype=np.int64)
+    count = np.zeros(size, dtype=np.int64)
+    fwd = np.zeros(size, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            p = faces[f, j]
+            q = faces[f, (j + 1) % 3]
+            a = min(p, q)
+            b = max(p, q)
+            s = _hash3(a, b, 0, bits)
+            while True:
+                if ka[s] == -1:
+                    ka[s] = a
+                    kb[s] = b
+                    break
+                if ka[s] == a and kb[s] == b:
+                    break
+                s = (s + 1) & mask
+            count[s] += 1
+            if p < q:
+                fwd[s] += 1
+    n_edges = 0
+    bad_edges = 0
+    for s in range(size):
+        if ka[s] != -1:
+            n_edges += 1
+            if count[s] != 2 or fwd[s] != 1:
+                bad_edges += 1
+    return n_edges, bad_edges
+
+
+@nb.njit(cache=True)
+def _vertex_link_cycles(faces, n_vertices):
+    """Number of boundary vertices whose incident faces do not form exactly one closed fan."""
+    nf = faces.shape[0]
+    deg = np.zeros(n_vertices + 1, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            deg[faces[f, j] + 1] += 1
+    for v in range(n_vertices):
+        deg[v + 1] += deg[v]
+    # For vertex v, its faces give link edges (next -> prev) around v.
+    nxt = np.empty(3 * nf, dtype=np.int64)
+    prv = np.empty(3 * nf, dtype=np.int64)
+    fill = deg[:-1].copy()
+    for f in range(nf):
+        for j in range(3):
+            v = faces[f, j]
+            nxt[fill[v]] = faces[f, (j + 1) % 3]
+            prv[fill[v]] = faces[f, (j + 2) % 3]
+            fill[v] += 1
+    bad = 0
+    for v in range(n_vertices):
+        lo = deg[v]
+        hi = deg[v + 1]
+        n = hi - lo
+        if n == 0:
+            continue
+        # Walk the link from the first face: prv -> nxt edges must form one cycle of length n.
+        start = nxt[lo]
+        cur = start
+        steps = 0
+        ok = True
+        while True:
+            found = -1
+            for i in range(lo, hi):
+                if prv[i] == cur:
+                    if found != -1:
+                        ok = False
+                    found = i
+            if found == -1 or not ok:
+                ok = False
+                break
+            cur = nxt[found]
+            steps += 1
+            if cur == start or steps > n:
+                break
+        if not ok or steps != n or cur != start:
+            bad += 1
+    return bad
+
+
+@nb.njit(cache=True)
+def _components(faces, n_vertices):
+    parent = np.arange(n_vertices)
+    for f in range(faces.shape[0]):
+        for j in range(1, 3):
+            a = faces[f, 0]
+            b = faces[f, j]
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    used = np.zeros(n_vertices, dtype=np.bool_)
+    for f in range(faces.shape[0]):
+        for j in range(3):
+            used[faces[f, j]] = True
+    count = 0
+    for v in range(n_vertices):
+        if used[v] and parent[v] == v:
+            count += 1
+    return count
+
+
+@dataclass(frozen=True)
+class SurfaceTopology:
+    """Topology of a closed triangle surface.  manifold: every edge in two faces of opposite
+    orientation and every vertex's faces one closed fan; genus summed over components."""
+
+    n_faces: int
+    n_vertices: int
+    n_edges: int
+    bad_edges: int
+    bad_vertices: int
+    components: int
+    euler: int
+
+    @property
+    def manifold(self) -> bool:
+        return self.bad_edges == 0 and self.bad_vertices == 0
+
+    @property
+    def genus(self) -> int:
+        return (2 * self.components - self.euler) // 2
+
+
+def surface_topology(faces: np.ndarray, n_vertices: int) -> SurfaceTopology:
+    """Edges, manifoldness, components and Euler characteristic of triangles (F, 3)."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    if faces.shape[0] == 0:
+        return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
+    n_edges, bad_edges = _surface_edges(faces, n_vertices)
+    bad_vertices = _vertex_link_cycles(faces, n_vertices)
+    used = np.unique(faces)
+    components = _components(faces, n_vertices)
+    euler = used.shape[0] - n_edges + faces.shape[0]
+    return SurfaceTopology(faces.shape[0], used.shape[0], n_edges, bad_edges, bad_vertices, components, euler)

@@ -1,0 +1,94 @@
+"""Slow, obvious references for the bit tricks and exact kernels, compared in the tests."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from paroct.octant import MAX_LEVEL
+
+
+def morton_key(x: int, y: int, z: int) -> int:
+    """Interleave bits one by one: bit i of x, y, z goes to bits 3i, 3i + 1, 3i + 2."""
+    key = 0
+    for i in range(21):
+        key |= ((x >> i) & 1) << (3 * i)
+        key |= ((y >> i) & 1) << (3 * i + 1)
+        key |= ((z >> i) & 1) << (3 * i + 2)
+    return key
+
+
+def octant_contains(anchor_a, level_a, anchor_b, level_b) -> bool:
+    """Octant a contains octant b (as closed sets of integer points) by comparing boxes."""
+    side_a = 1 << (MAX_LEVEL - level_a)
+    side_b = 1 << (MAX_LEVEL - level_b)
+    return all(anchor_a[i] <= anchor_b[i] and anchor_b[i] + side_b <= anchor_a[i] + side_a for i in range(3))
+
+
+def winding_number(point, vertices, faces, direction) -> int:
+    """Signed crossings of the ray from -infinity to point along direction, with Python fractions.
+
+    The point is moved to point - eps * direction (and a generic transverse eps**2, eps**3 offset
+    in the row coordinates used by paroct.rays is NOT reproduced here: only use points off the surface).
+    """
+    from fractions import Fraction
+
+    d = [Fraction(int(c)) for c in direction]
+    p = [Fraction(c) for c in point]
+    total = 0
+    for f in faces:
+        a, b, c = ([Fraction(v) for v in vertices[i]] for i in f)
+        # Solve p - s d = a + beta (b - a) + gamma (c - a), s > 0 means crossing before the point.
+        m = [[b[i] - a[i], c[i] - a[i], d[i]] for i in range(3)]
+        rhs = [p[i] - a[i] for i in range(3)]
+        det = _det3(m)
+        if det == 0:
+            continue
+        beta = _det3([[rhs[i], m[i][1], m[i][2]] for i in range(3)]) / det
+        gamma = _det3([[m[i][0], rhs[i], m[i][2]] for i in range(3)]) / det
+        s = _det3([[m[i][0], m[i][1], rhs[i]] for i in range(3)]) / det
+        if beta > 0 and gamma > 0 and beta + gamma < 1 and s > 0:
+            normal = _cross([b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)])
+            total += 1 if sum(normal[i] * d[i] for i in range(3)) < 0 else -1
+    return total
+
+
+def _det3(m):
+    return (
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    )
+
+
+def _cross(u, v):
+    return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def tet_radius_ratio(p: np.ndarray) -> float:
+    """3 r / R of one tet (4, 3) from the circumcentre solved as a linear system."""
+    a = 2.0 * (p[1:] - p[0])
+    b = np.sum(p[1:] ** 2 - p[0] ** 2, axis=1)
+    centre = np.linalg.solve(a, b)
+    circum = np.linalg.norm(centre - p[0])
+    vol = abs(np.linalg.det(p[1:] - p[0])) / 6.0
+    area = 0.0
+    for skip in range(4):
+        q = np.delete(p, skip, axis=0)
+        area += 0.5 * np.linalg.norm(np.cross(q[1] - q[0], q[2] - q[0]))
+    return 3.0 * (3.0 * vol / area) / circum
+
+
+def tet_dihedral_angles(p: np.ndarray) -> list[float]:
+    """The six dihedral angles (degrees) from the angle between the two faces' in-plane normals."""
+    out = []
+    for i in range(4):
+        for j in range(i + 1, 4):
+            k, m = [x for x in range(4) if x not in (i, j)]
+            e = p[j] - p[i]
+            e = e / np.linalg.norm(e)
+            u = p[k] - p[i]
+            u = u - e * np.dot(u, e)
+            w = p[m] - p[i]
+            w = w - e * np.dot(w, e)
+            out.append(np.degrees(np.arccos(np.clip(np.dot(u, w) / np.linalg.norm(u) / np.linalg.norm(w), -1, 1))))
+    return out

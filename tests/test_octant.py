@@ -1,0 +1,69 @@
+import numpy as np
+import pytest
+
+from paroct import octant
+from paroct.octree import linearize, tree_is_complete, tree_is_linear, tree_is_sorted
+
+from . import naive
+
+RNG = np.random.default_rng(20261122)
+
+
+def test_morton_key_matches_bit_by_bit_interleave():
+    coords = RNG.integers(0, 1 << 21, size=(500, 3))
+    coords = np.vstack([coords, [[0, 0, 0], [(1 << 21) - 1] * 3, [1, 0, 0], [0, 1, 0], [0, 0, 1]]])
+    keys = octant.morton_keys(coords)
+    assert [int(k) for k in keys] == [naive.morton_key(*map(int, c)) for c in coords]
+    assert np.array_equal(octant.morton_decode(keys), coords)
+
+
+def test_morton_order_sorts_octants_after_ancestors():
+    # Children keys of a parent are the parent key plus child id at the child's level.
+    parent = octant.morton_key(8 << 10, 4 << 10, 12 << 10)
+    level = octant.MAX_LEVEL - 12
+    for c in range(8):
+        child = parent | (c << (3 * (octant.MAX_LEVEL - level - 1)))
+        assert octant.octant_parent_key(child, level + 1) == parent
+        assert octant.octant_child_id(child, level + 1) == c
+        assert octant.octant_is_ancestor(parent, level, child, level + 1)
+        assert not octant.octant_is_ancestor(child, level + 1, parent, level)
+        assert child <= octant.octant_last_key(parent, level)
+
+
+@pytest.mark.parametrize("trial", range(200))
+def test_octant_is_ancestor_matches_box_containment(trial):
+    la, lb = sorted(RNG.integers(0, 8, size=2) + octant.MAX_LEVEL - 8)
+    side_a = 1 << (octant.MAX_LEVEL - la)
+    side_b = 1 << (octant.MAX_LEVEL - lb)
+    a = RNG.integers(0, (1 << octant.MAX_LEVEL) // side_a, size=3) * side_a
+    # Half the time put b inside a.
+    if trial % 2:
+        b = a + RNG.integers(0, side_a // side_b, size=3) * side_b
+    else:
+        b = RNG.integers(0, (1 << octant.MAX_LEVEL) // side_b, size=3) * side_b
+    ka = octant.morton_key(*a)
+    kb = octant.morton_key(*b)
+    expect = la < lb and naive.octant_contains(a, la, b, lb)
+    assert octant.octant_is_ancestor(ka, la, kb, lb) == expect
+    assert octant.octant_overlaps(ka, la, kb, lb) == (naive.octant_contains(a, la, b, lb) or naive.octant_contains(b, lb, a, la))
+
+
+def _uniform_tree(level):
+    n = 1 << level
+    g = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3) << (octant.MAX_LEVEL - level)
+    keys = np.sort(octant.morton_keys(g))
+    return keys, np.full(keys.shape, level, dtype=np.int8)
+
+
+def test_tree_predicates_on_uniform_and_broken_trees():
+    keys, levels = _uniform_tree(2)
+    assert tree_is_sorted(keys, levels) and tree_is_linear(keys, levels) and tree_is_complete(keys, levels)
+    assert not tree_is_complete(keys[:-1], levels[:-1])  # a hole
+    assert tree_is_linear(keys[:-1], levels[:-1])
+    # Insert the parent of the first eight octants: sorted but no longer linear.
+    k2 = np.concatenate([[keys[0]], keys])
+    l2 = np.concatenate([[1], levels]).astype(np.int8)
+    assert tree_is_sorted(k2, l2) and not tree_is_linear(k2, l2)
+    keep = linearize(k2, l2)
+    assert keep[0] == False and keep[1:].all()  # noqa: E712
+    assert not tree_is_sorted(keys[::-1], levels[::-1])
