@@ -33,10 +33,10 @@ def winding_number(point, vertices, faces, direction) -> int:
     from fractions import Fraction
 
     d = [Fraction(int(c)) for c in direction]
-    p = [Fraction(c) for c in point]
+    p = [Fraction(int(c)) for c in point]
     total = 0
     for f in faces:
-        a, b, c = ([Fraction(v) for v in vertices[i]] for i in f)
+        a, b, c = ([Fraction(int(v)) for v in vertices[i]] for i in f)
         # Solve p - s d = a + beta (b - a) + gamma (c - a), s > 0 means crossing before the point.
         m = [[b[i] - a[i], c[i] - a[i], d[i]] for i in range(3)]
         rhs = [p[i] - a[i] for i in range(3)]

@@ -1,0 +1,125 @@
+"""The exact row-ray kernel against Python-integer and fraction references."""
+
+import numpy as np
+import pytest
+
+from paroct import rays
+from paroct.frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, fat_frame, row_basis
+from paroct.lattice import leaf_tets
+from paroct.octree import octant_lattice_anchors, uniform_leaves
+
+from . import naive
+
+RNG = np.random.default_rng(7)
+
+
+def test_sign_sum_of_products_is_exact_at_the_limits():
+    for _ in range(20000):
+        w = RNG.integers(-(1 << 60), 1 << 60, size=3)
+        d = RNG.integers(-(1 << 30) + 1, 1 << 30, size=3)
+        if RNG.random() < 0.3:  # force exact cancellation
+            d[2] = 0
+            w[1] = -w[0]
+            d[1] = d[0]
+        exact = sum(int(a) * int(b) for a, b in zip(w, d))
+        assert rays.sign_sum_of_products(w[0], d[0], w[1], d[1], w[2], d[2]) == (exact > 0) - (exact < 0)
+
+
+def test_row_bases_are_unimodular_and_map_each_direction_to_e1():
+    for k, d in enumerate(EDGE_DIRECTIONS):
+        T = row_basis(k)
+        assert round(np.linalg.det(T)) == 1
+        assert np.array_equal(T @ d, [1, 0, 0])
+        assert np.abs(T).max() == 1
+
+
+def _box_surface(lo, hi):
+    v = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    f = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                  [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    return lo + (hi - lo) * v, f
+
+
+def _rotation(rng):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def _lattice_points(frame, lo, hi):
+    keys, _ = uniform_leaves(frame, lo, hi, frame.levels)
+    points, _ = leaf_tets(octant_lattice_anchors(keys, frame), np.ones(len(keys), dtype=np.int64))
+    return points
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_winding_of_rotated_box_matches_fraction_reference(seed):
+    rng = np.random.default_rng(seed)
+    v, f = _box_surface(np.zeros(3), np.array([1.0, 0.7, 0.4]))
+    v = v @ _rotation(rng).T + rng.normal(size=3)
+    frame = fat_frame(v.min(0), v.max(0), 0.15)
+    snapped = rays.snap_surface(frame, v)
+    points = _lattice_points(frame, v.min(0), v.max(0))
+    pick = rng.choice(len(points), size=min(150, len(points)), replace=False)
+    for d in (X_AXIS_DIRECTION, 0, 6):
+        crossings = rays.row_crossings(frame, snapped, f, d)
+        w = rays.winding_numbers(crossings, points)
+        assert set(np.unique(w)) <= {0, 1}
+        for i in pick:
+            # The reference moves the point by -eps along d; in snapped units points are exact.
+            p = points[i] * (1 << rays.snap_bits(frame))
+            assert w[i] == naive.winding_number(p, snapped, f, EDGE_DIRECTIONS[d])
+
+
+def test_all_seven_directions_agree_off_the_surface():
+    v, f = _box_surface(np.zeros(3), np.ones(3))
+    frame = fat_frame(v.min(0), v.max(0), 0.1)
+    snapped = rays.snap_surface(frame, v)
+    points = _lattice_points(frame, v.min(0), v.max(0))
+    classes = [rays.winding_numbers(rays.row_crossings(frame, snapped, f, d), points) for d in range(7)]
+    x = frame.to_space(points)
+    inside = np.all((x > 0) & (x < 1), axis=1)
+    for w in classes:
+        assert np.array_equal(w > 0, inside)
+
+
+def test_watertight_when_rows_pass_exactly_through_vertices_and_edges():
+    # A box whose corners and edges sit exactly on lattice rows: every hit is a tie.
+    from paroct.frame import FatFrame
+
+    frame = FatFrame(origin=np.zeros(3), h=1.0, levels=6)
+    lo, hi = np.array([4.0, 4.0, 4.0]), np.array([12.0, 10.0, 8.0])
+    v, f = _box_surface(lo, hi)
+    snapped = rays.snap_surface(frame, v)
+    n = np.arange(0, 40)
+    points = np.stack(np.meshgrid(n, n, n, indexing="ij"), -1).reshape(-1, 3)
+    for d in range(7):
+        w = rays.winding_numbers(rays.row_crossings(frame, snapped, f, d), points)
+        assert set(np.unique(w)) <= {0, 1}, d
+        x = frame.to_space(points)
+        strictly_in = np.all((x > lo) & (x < hi), axis=1)
+        strictly_out = np.any((x < lo) | (x > hi), axis=1)
+        assert np.all(w[strictly_in] == 1) and np.all(w[strictly_out] == 0)
+
+
+def test_cut_fractions_lie_on_the_surface():
+    v, f = _box_surface(np.zeros(3), np.ones(3))
+    v = v @ _rotation(np.random.default_rng(3)).T
+    frame = fat_frame(v.min(0), v.max(0), 0.1)
+    snapped = rays.snap_surface(frame, v)
+    points = _lattice_points(frame, v.min(0), v.max(0))
+    inside = rays.winding_numbers(rays.row_crossings(frame, snapped, f, X_AXIS_DIRECTION), points) > 0
+    lookup = {tuple(p): i for i, p in enumerate(points)}
+    normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    for d in range(7):
+        ends = [lookup.get(tuple(p + EDGE_DIRECTIONS[d]), -1) for p in points]
+        ends = np.array(ends)
+        cut = (ends >= 0) & (inside != inside[np.maximum(ends, 0)])
+        starts = points[cut]
+        frac, unresolved = rays.edge_cut_fractions(rays.row_crossings(frame, snapped, f, d), starts, inside[cut])
+        assert not unresolved.any()
+        x = frame.to_space(starts + frac[:, None] * EDGE_DIRECTIONS[d])
+        # Distance to the nearest face plane of the unit box (rotated) is ~0.
+        local = x @ _rotation(np.random.default_rng(3))
+        dist = np.min(np.abs(np.concatenate([local, local - 1], axis=1)), axis=1)
+        assert dist.max() < 1e-6
