@@ -143,8 +143,13 @@ def _surface_edges(faces, n_vertices):
 
 
 @nb.njit(cache=True)
-def _vertex_link_cycles(faces, n_vertices):
-    """Number of boundary vertices whose incident faces do not form exactly one closed fan."""
+def nonmanifold_vertices(faces, n_vertices):
+    """Mask (V,) of surface vertices whose incident faces do not form exactly one closed fan.
+
+    The fan test walks the link of v: each face (v, p, q) is a link edge p -> q; a manifold
+    vertex has every link vertex leaving exactly once and the walk closing after all faces.
+    Vertices on an edge shared by other than two faces fail it too.
+    """
     nf = faces.shape[0]
     deg = np.zeros(n_vertices + 1, dtype=np.int64)
     for f in range(nf):
@@ -162,7 +167,7 @@ def _vertex_link_cycles(faces, n_vertices):
             nxt[fill[v]] = faces[f, (j + 1) % 3]
             prv[fill[v]] = faces[f, (j + 2) % 3]
             fill[v] += 1
-    bad = 0
+    bad = np.zeros(n_vertices, dtype=np.bool_)
     for v in range(n_vertices):
         lo = deg[v]
         hi = deg[v + 1]
@@ -189,7 +194,7 @@ def _vertex_link_cycles(faces, n_vertices):
             if cur == start or steps > n:
                 break
         if not ok or steps != n or cur != start:
-            bad += 1
+            bad[v] = True
     return bad
 
 
@@ -247,7 +252,7 @@ def surface_topology(faces: np.ndarray, n_vertices: int) -> SurfaceTopology:
     if faces.shape[0] == 0:
         return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
     n_edges, bad_edges = _surface_edges(faces, n_vertices)
-    bad_vertices = _vertex_link_cycles(faces, n_vertices)
+    bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
     used = np.unique(faces)
     components = _components(faces, n_vertices)
     euler = used.shape[0] - n_edges + faces.shape[0]

@@ -1,0 +1,234 @@
+"""The meshing pipeline: surface -> frame -> octree -> classify and cut -> stuff -> report.
+
+Each stage is a pure function over arrays; this module only sequences them, times them
+and turns their findings into the report.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import rays
+from .errors import ParoctError
+from .frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
+from .lattice import leaf_tets
+from .octant import MAX_LEVEL
+from .octree import octant_lattice_anchors, uniform_leaves
+from .quality import tet_quality
+from .repair import remove_pinches
+from .stuffing import CutEdges, _collect_cut_edges, stuff, warp_targets
+from .surface import Surface, SurfaceSource, load_surface
+from .topology import boundary_faces, match_faces, surface_topology
+
+#: Default element size as a fraction of the bounding-box diagonal.
+DEFAULT_DIVISIONS = 40
+#: Peak bytes per lattice tet of the box around the solid, measured (bench/), with headroom.
+BYTES_PER_BOX_TET = 160
+#: Deepest frame allowed: row and cell indices must fit the 21-bit fields of the crossing keys.
+MAX_FRAME_LEVELS = MAX_LEVEL - 1
+
+
+@dataclass(frozen=True)
+class TetMesh:
+    """A tetrahedral mesh: points (N, 3) float64, tets (M, 4) int32 of positive volume."""
+
+    points: np.ndarray
+    tets: np.ndarray
+
+    def __post_init__(self):
+        if self.points.ndim != 2 or self.points.shape[1] != 3:
+            raise ValueError(f"points.shape = {self.points.shape}, expected (N, 3)")
+        if self.tets.ndim != 2 or self.tets.shape[1] != 4:
+            raise ValueError(f"tets.shape = {self.tets.shape}, expected (M, 4)")
+        if self.tets.size and (self.tets.min() < 0 or self.tets.max() >= self.points.shape[0]):
+            raise ValueError(f"tets index {self.tets.min()}..{self.tets.max()} but len(points) = {self.points.shape[0]}")
+
+
+@dataclass
+class MeshReport:
+    """What the mesher did and measured.  Lengths in model units, angles in degrees."""
+
+    size: float
+    levels: int
+    n_tets: int = 0
+    n_vertices: int = 0
+    min_dihedral: float = float("nan")
+    max_dihedral: float = float("nan")
+    min_radius_ratio: float = float("nan")
+    mesh_volume: float = 0.0
+    solid_volume: float = 0.0
+    input_genus: int = 0
+    input_components: int = 0
+    boundary_genus: int = 0
+    boundary_components: int = 0
+    boundary_manifold: bool = True
+    unresolved_cuts: int = 0
+    repaired_tets: int = 0
+    stage_seconds: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def volume_error(self) -> float:
+        """(mesh volume - solid volume) / solid volume."""
+        return (self.mesh_volume - self.solid_volume) / self.solid_volume if self.solid_volume else float("nan")
+
+
+@dataclass(frozen=True)
+class MeshResult:
+    mesh: TetMesh
+    report: MeshReport
+
+
+def estimate_box_tets(surface: Surface, size: float) -> int:
+    """Lattice tets of the uniform frame over the solid's box: 12 per h^3 of box volume."""
+    ext = surface.bbox_max - surface.bbox_min + 2 * size
+    return int(12 * np.prod(ext) / size**3)
+
+
+def _available_memory() -> int:
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 8 << 30
+
+
+class _Stages:
+    def __init__(self, report: MeshReport, progress: Callable[[str], None] | None):
+        self.report = report
+        self.progress = progress
+        self._t = time.perf_counter()
+
+    def done(self, name: str) -> None:
+        now = time.perf_counter()
+        self.report.stage_seconds[name] = self.report.stage_seconds.get(name, 0.0) + now - self._t
+        self._t = now
+        if self.progress:
+            self.progress(name)
+
+
+def resolve_size(surface: Surface, size: float | None, divisions: float | None) -> float:
+    """The finest long edge: ``size`` if given, else the diagonal over ``divisions`` (default 40)."""
+    if size is not None:
+        if not (isinstance(size, (int, float, np.floating)) and np.isfinite(size) and size > 0):
+            raise ParoctError(f"size = {size}: the element size must be a positive number")
+        return float(size)
+    d = DEFAULT_DIVISIONS if divisions is None else divisions
+    if not (np.isfinite(d) and d > 0):
+        raise ParoctError(f"divisions = {d}: must be a positive number")
+    return surface.diagonal / d
+
+
+def mesh(
+    source: SurfaceSource | Surface,
+    size: float | None = None,
+    *,
+    divisions: float | None = None,
+    max_memory: int | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> MeshResult:
+    """Fill a closed solid with fat-lattice tets, the boundary stuffed onto its surface.
+
+    source: surface file path (STL, OBJ, OFF, PLY), manifold3d.Manifold, (vertices, faces)
+    or a loaded Surface.  size: long edge of the lattice tets in model units (default:
+    bounding-box diagonal / divisions, divisions default 40).  max_memory: bytes the run may
+    use (default: the machine's available memory); a size that would need more is refused
+    before any work.  progress: called with each stage's name when it ends.
+    """
+    t0 = time.perf_counter()
+    surface = source if isinstance(source, Surface) else load_surface(source)
+    h = resolve_size(surface, size, divisions)
+    report = MeshReport(size=h, levels=0, solid_volume=surface.volume,
+                        input_genus=surface.genus, input_components=surface.components)
+    report.stage_seconds["load"] = time.perf_counter() - t0
+    stages = _Stages(report, progress)
+
+    box_tets = estimate_box_tets(surface, h)
+    budget = _available_memory() if max_memory is None else int(max_memory)
+    if box_tets * BYTES_PER_BOX_TET > budget:
+        raise ParoctError(
+            f"size = {h:.6g} needs about {box_tets:.3g} lattice tets and {box_tets * BYTES_PER_BOX_TET / 2**30:.1f} GiB, "
+            f"more than the {budget / 2**30:.1f} GiB allowed; use a larger size or raise max_memory (--max-memory)"
+        )
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
+    if frame.levels > MAX_FRAME_LEVELS:
+        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
+    report.levels = frame.levels
+    stages.done("frame")
+
+    keys, _ = uniform_leaves(frame, surface.bbox_min - h, surface.bbox_max + h, frame.levels)
+    anchors = octant_lattice_anchors(keys, frame)
+    stages.done("octree")
+
+    coords, tets = leaf_tets(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    stages.done("emit")
+
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+    inside = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords) > 0
+    tets = tets[inside[tets].any(axis=1)]
+    stages.done("classify")
+
+    cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report)
+    stages.done("cut")
+
+    targets = warp_targets(cuts, coords.shape[0], h)
+    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
+    stages.done("stuff")
+
+    points, out_tets = _repair_and_compact(points, out_tets, report)
+    stages.done("repair")
+
+    _measure(points, out_tets, surface, report)
+    stages.done("quality")
+    return MeshResult(TetMesh(points, out_tets), report)
+
+
+def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
+    """Cut points of every lattice edge of the tets whose ends differ in class."""
+    starts, ends, dirs, *table = _collect_cut_edges(np.ascontiguousarray(tets, dtype=np.int64), inside, coords)
+    fracs = np.empty(starts.shape[0])
+    for d in range(EDGE_DIRECTIONS.shape[0]):
+        sel = np.nonzero(dirs == d)[0]
+        if sel.size == 0:
+            continue
+        if d not in crossings:
+            crossings[d] = rays.row_crossings(frame, snapped, faces, d)
+        f, unresolved = rays.edge_cut_fractions(crossings[d], coords[starts[sel]], inside[starts[sel]])
+        fracs[sel] = f
+        report.unresolved_cuts += int(unresolved.sum())
+    u = coords[starts] + fracs[:, None] * (coords[ends] - coords[starts])
+    return CutEdges(starts, ends, dirs, fracs, frame.to_space(u), tuple(table))
+
+
+def _repair_and_compact(points, tets, report):
+    tets, report.repaired_tets = remove_pinches(points.shape[0], tets)
+    used = np.zeros(points.shape[0], dtype=bool)
+    used[tets.ravel()] = True
+    new_id = np.cumsum(used) - 1
+    return np.ascontiguousarray(points[used]), new_id[tets].astype(np.int32)
+
+
+def _measure(points, tets, surface: Surface, report: MeshReport) -> None:
+    q = tet_quality(points, tets)
+    report.n_tets = int(tets.shape[0])
+    report.n_vertices = int(points.shape[0])
+    if tets.shape[0]:
+        report.min_dihedral = float(q.min_dihedral.min())
+        report.max_dihedral = float(q.max_dihedral.max())
+        report.min_radius_ratio = float(q.radius_ratio.min())
+    report.mesh_volume = float(q.volume.sum())
+    neighbour, _, _ = match_faces(tets)
+    topo = surface_topology(boundary_faces(tets, neighbour), points.shape[0])
+    report.boundary_genus = topo.genus
+    report.boundary_components = topo.components
+    report.boundary_manifold = topo.manifold

@@ -1,0 +1,384 @@
+"""Isosurface stuffing on the fat lattice (Labelle & Shewchuk, SIGGRAPH 2007).
+
+Input: the lattice tets around and inside the solid, every lattice vertex classified
+inside (+) or outside (-), and the cut point of every edge whose ends differ.
+
+1. Warp: a cut point *violates* an end of its edge when it lies closer to it than
+   alpha times the edge length (alpha_long = 0.24999 for long edges, alpha_short =
+   0.41189 for short ones).  Every violated vertex moves to its closest violating cut
+   point and becomes a surface vertex (0); cut points on edges touching a warped
+   vertex disappear.  Warps are decided from the original positions, all at once.
+2. Stencils: each lattice tet keeps the part of itself on the + side, split into tets
+   by the stencil of its sign pattern; quadrilateral faces are split by the parity
+   rule so that neighbouring tets agree.  Tets with no + vertex are dropped.
+
+For the BCC lattice this proves every dihedral angle in [10.7, 164.8] degrees, for any
+positions of the cut points (Labelle & Shewchuk, Theorem 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .frame import EDGE_DIRECTIONS, EDGE_IS_LONG
+
+ALPHA_LONG = 0.24999
+ALPHA_SHORT = 0.41189
+
+_EDGE_PAIRS = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
+_FIB = np.uint64(0x9E3779B97F4A7C15)
+#: Direction index of a positive edge vector by its sign bits (x | y << 1 | z << 2); -1: not an edge.
+_DIRECTION_OF_BITS = np.array([-1, 0, 1, 3, 2, 4, 5, 6], dtype=np.int64)
+
+
+@nb.njit(cache=True, inline="always")
+def _hash2(a, b, bits):
+    h = (np.uint64(a) * _FIB) ^ np.uint64(b)
+    return np.int64((h * _FIB) >> np.uint64(64 - bits))
+
+
+@nb.njit(cache=True)
+def _edge_table(n_expected):
+    bits = 4
+    while (np.int64(1) << bits) < 2 * n_expected + 16:
+        bits += 1
+    return np.full(np.int64(1) << bits, -1, dtype=np.int64), np.empty(np.int64(1) << bits, dtype=np.int64), bits
+
+
+@nb.njit(cache=True)
+def _lookup(table_a, table_b, bits, a, b):
+    """Slot of edge (a, b), a < b, in the table; -1 - slot of the empty slot where it would go."""
+    mask = (np.int64(1) << bits) - 1
+    s = _hash2(a, b, bits)
+    while True:
+        if table_a[s] == -1:
+            return -1 - s
+        if table_a[s] == a and table_b[s] == b:
+            return s
+        s = (s + 1) & mask
+
+
+@nb.njit(cache=True)
+def _collect_cut_edges(tets, inside, coords):
+    """Unique lattice edges of tets whose ends differ in class.
+
+    Returns (starts (E,) vertex ids, ends (E,), directions (E,) index into EDGE_DIRECTIONS,
+    slot table for lookup: table_a, table_b, table_edge, bits); end - start = side * direction.
+    """
+    m = tets.shape[0]
+    table_a, table_b, bits = _edge_table(m)
+    table_edge = np.full(table_a.shape[0], -1, dtype=np.int64)
+    starts = np.empty(m + 16, dtype=np.int64)
+    ends = np.empty(m + 16, dtype=np.int64)
+    dirs = np.empty(m + 16, dtype=np.int64)
+    n = 0
+    for t in range(m):
+        for e in range(6):
+            p = tets[t, _EDGE_PAIRS[e, 0]]
+            q = tets[t, _EDGE_PAIRS[e, 1]]
+            if inside[p] == inside[q]:
+                continue
+            a = min(p, q)
+            b = max(p, q)
+            s = _lookup(table_a, table_b, bits, a, b)
+            if s >= 0:
+                continue
+            s = -1 - s
+            table_a[s] = a
+            table_b[s] = b
+            table_edge[s] = n
+            dx = coords[q, 0] - coords[p, 0]
+            dy = coords[q, 1] - coords[p, 1]
+            dz = coords[q, 2] - coords[p, 2]
+            if dx < 0 or dy < 0 or dz < 0:
+                p, q = q, p
+                dx, dy, dz = -dx, -dy, -dz
+            bits3 = (1 if dx > 0 else 0) | (2 if dy > 0 else 0) | (4 if dz > 0 else 0)
+            if n == starts.shape[0]:
+                starts = np.concatenate((starts, np.empty(n, dtype=np.int64)))
+                ends = np.concatenate((ends, np.empty(n, dtype=np.int64)))
+                dirs = np.concatenate((dirs, np.empty(n, dtype=np.int64)))
+            starts[n] = p
+            ends[n] = q
+            dirs[n] = _DIRECTION_OF_BITS[bits3]
+            n += 1
+            if 2 * n > table_a.shape[0]:
+                raise ValueError("edge table overflow")
+    return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), table_a, table_b, table_edge, bits
+
+
+@nb.njit(cache=True)
+def _warp(n_vertices, starts, ends, fracs, lengths, alphas):
+    """Warp target per vertex: the cut edge (index) of its closest violating cut point, or -1."""
+    best = np.full(n_vertices, np.inf)
+    target = np.full(n_vertices, -1, dtype=np.int64)
+    for e in range(starts.shape[0]):
+        f = fracs[e]
+        if f < alphas[e]:
+            d = f * lengths[e]
+            v = starts[e]
+            if d < best[v]:
+                best[v] = d
+                target[v] = e
+        if 1.0 - f < alphas[e]:
+            d = (1.0 - f) * lengths[e]
+            v = ends[e]
+            if d < best[v]:
+                best[v] = d
+                target[v] = e
+    return target
+
+
+@dataclass(frozen=True)
+class CutEdges:
+    """Lattice edges whose ends differ in class.  starts, ends: (E,) vertex ids with
+    end - start = side * EDGE_DIRECTIONS[directions]; fracs: (E,) cut position from
+    start, in [0, 1]; points: (E, 3) space positions of the cut points; table: the
+    hash table (keys a, keys b, edge index, bits) finding an edge from its two ends."""
+
+    starts: np.ndarray
+    ends: np.ndarray
+    directions: np.ndarray
+    fracs: np.ndarray
+    points: np.ndarray
+    table: tuple
+
+
+def warp_targets(cuts: CutEdges, n_vertices: int, h: float) -> np.ndarray:
+    """Index into the cut edges of the cut point each vertex warps to, or -1; (V,) int64.
+
+    Edge lengths are those of the finest level (h long, h sqrt(3)/2 short).
+    """
+    is_long = EDGE_IS_LONG[cuts.directions]
+    lengths = np.where(is_long, h, h * np.sqrt(3.0) / 2.0)
+    alphas = np.where(is_long, ALPHA_LONG, ALPHA_SHORT)
+    return _warp(n_vertices, cuts.starts, cuts.ends, cuts.fracs, lengths, alphas)
+
+
+def _prism_triangulations() -> np.ndarray:
+    """Three tets (8, 3, 4) splitting a triangular prism, per choice of quad diagonals.
+
+    Prism vertices 0, 1, 2 (bottom) and 3, 4, 5 (top, 3 + i above i); quad i is
+    (i, i+1, 4+i, 3+i) mod 3 and bit i of the index picks its diagonal: 0 joins
+    bottom i to top i+1, 1 joins bottom i+1 to top i.  The two cyclic choices (0 and 7)
+    admit no triangulation and hold -1.  Found by brute force over triples of tets.
+    """
+    import itertools
+
+    bottom, top = [0, 1, 2], [3, 4, 5]
+    quads = [(bottom[i], bottom[(i + 1) % 3], top[(i + 1) % 3], top[i]) for i in range(3)]
+    table = np.full((8, 3, 4), -1, dtype=np.int64)
+    for bits in range(8):
+        diagonals = [(q[0], q[2]) if not (bits >> i) & 1 else (q[1], q[3]) for i, q in enumerate(quads)]
+        boundary = {frozenset(bottom), frozenset(top)}
+        for q, d in zip(quads, diagonals):
+            for other in (x for x in q if x not in d):
+                boundary.add(frozenset(d + (other,)))
+        for triple in itertools.combinations(itertools.combinations(range(6), 4), 3):
+            if any(set(q) <= set(t) for t in triple for q in quads):
+                continue  # a tet holding a whole (planar) quad is flat
+            count: dict = {}
+            for t in triple:
+                for f in itertools.combinations(t, 3):
+                    count[frozenset(f)] = count.get(frozenset(f), 0) + 1
+            if {f for f, c in count.items() if c == 1} == boundary and max(count.values()) <= 2:
+                table[bits] = triple
+                break
+    return table
+
+
+PRISM_TETS = _prism_triangulations()
+
+
+@nb.njit(cache=True, inline="always")
+def _quad_first_diagonal(coords, points, a, b, e, cut_ae, cut_be):
+    """Diagonal of the quad (a, b, cut(b, e), cut(a, e)) on lattice face (a, b, e), a and b inside.
+
+    True: the diagonal joins a to cut(b, e); False: b to cut(a, e).  It depends on the face
+    alone, so the two lattice tets sharing the face split it the same way.
+    """
+    da = 0.0
+    db = 0.0
+    for k in range(3):
+        da += (points[a, k] - points[cut_be, k]) ** 2
+        db += (points[b, k] - points[cut_ae, k]) ** 2
+    if da != db:
+        return da < db
+    return a < b
+
+
+@nb.njit(cache=True)
+def _cut_id(table_a, table_b, table_edge, bits, n_lattice, p, q):
+    a = min(p, q)
+    b = max(p, q)
+    s = _lookup(table_a, table_b, bits, a, b)
+    return n_lattice + table_edge[s]
+
+
+@nb.njit(cache=True)
+def _emit(out, k, v0, v1, v2, v3):
+    out[k, 0] = v0
+    out[k, 1] = v1
+    out[k, 2] = v2
+    out[k, 3] = v3
+    return k + 1
+
+
+@nb.njit(cache=True)
+def _stencils(tets, signs, was_inside, coords, points, table_a, table_b, table_edge, bits, n_lattice, prism, out, count_only):
+    """Stencil tets of every lattice tet; returns the number written (or needed, if count_only)."""
+    k = 0
+    plus = np.empty(4, dtype=np.int64)
+    zero = np.empty(4, dtype=np.int64)
+    minus = np.empty(4, dtype=np.int64)
+    pv = np.empty(6, dtype=np.int64)
+    for t in range(tets.shape[0]):
+        n_p = 0
+        n_z = 0
+        n_m = 0
+        for i in range(4):
+            v = tets[t, i]
+            if signs[v] > 0:
+                plus[n_p] = v
+                n_p += 1
+            elif signs[v] < 0:
+                minus[n_m] = v
+                n_m += 1
+            else:
+                zero[n_z] = v
+                n_z += 1
+        if n_p == 0:
+            if n_z == 4:
+                # Every vertex on the surface: keep the tet where the lattice put it mostly inside.
+                n_in = 0
+                for i in range(4):
+                    if was_inside[tets[t, i]]:
+                        n_in += 1
+                if n_in >= 2:
+                    if not count_only:
+                        _emit(out, k, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+                    k += 1
+            continue
+        if n_m == 0:
+            if not count_only:
+                _emit(out, k, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+            k += 1
+            continue
+        if n_p == 1:
+            if not count_only:
+                a = plus[0]
+                w = np.empty(4, dtype=np.int64)
+                for i in range(4):
+                    v = tets[t, i]
+                    w[i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, v) if signs[v] < 0 else v
+                _emit(out, k, w[0], w[1], w[2], w[3])
+            k += 1
+            continue
+        if n_p == 2 and n_z == 1:
+            if not count_only:
+                a = plus[0]
+                b = plus[1]
+                z = zero[0]
+                e = minus[0]
+                cae = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, e)
+                cbe = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, e)
+                if _quad_first_diagonal(coords, points, a, b, e, cae, cbe):
+                    _emit(out, k, z, a, b, cbe)
+                    _emit(out, k + 1, z, a, cbe, cae)
+                else:
+                    _emit(out, k, z, a, b, cae)
+                    _emit(out, k + 1, z, b, cbe, cae)
+            k += 2
+            continue
+        # Prisms: 2 + and 2 -, or 3 + and 1 -.
+        if not count_only:
+            if n_p == 2:
+                a = plus[0]
+                b = plus[1]
+                c = minus[0]
+                d = minus[1]
+                pv[0] = a
+                pv[1] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, c)
+                pv[2] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, d)
+                pv[3] = b
+                pv[4] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, c)
+                pv[5] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, d)
+                choice = 0
+                # quad 0 = (a, cut ac, cut bc, b): bit 0 clear joins a to cut bc.
+                if not _quad_first_diagonal(coords, points, a, b, c, pv[1], pv[4]):
+                    choice |= 1
+                # quad 2 = (cut ad, a, b, cut bd): bit 2 set joins a to cut bd.
+                if _quad_first_diagonal(coords, points, a, b, d, pv[2], pv[5]):
+                    choice |= 4
+                # quad 1 is the cut surface, free: any non-cyclic choice, the shorter diagonal if both are.
+                d0 = 0.0
+                d1 = 0.0
+                for i in range(3):
+                    d0 += (points[pv[1], i] - points[pv[5], i]) ** 2
+                    d1 += (points[pv[2], i] - points[pv[4], i]) ** 2
+                if prism[choice, 0, 0] < 0 or (prism[choice | 2, 0, 0] >= 0 and d1 < d0):
+                    choice |= 2
+            else:
+                for i in range(3):
+                    pv[i] = plus[i]
+                    pv[3 + i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, plus[i], minus[0])
+                choice = 0
+                for i in range(3):
+                    j = (i + 1) % 3
+                    if not _quad_first_diagonal(coords, points, pv[i], pv[j], minus[0], pv[3 + i], pv[3 + j]):
+                        choice |= 1 << i
+            if prism[choice, 0, 0] < 0:
+                choice = choice ^ 1  # cyclic: never for the parity rule; flip one diagonal to stay valid
+            for i in range(3):
+                _emit(out, k + i, pv[prism[choice, i, 0]], pv[prism[choice, i, 1]], pv[prism[choice, i, 2]], pv[prism[choice, i, 3]])
+        k += 3
+    return k
+
+
+@nb.njit(cache=True, parallel=True)
+def _orient(points, tets):
+    """Swap two vertices of every tet of negative volume; returns the number of zero-volume tets."""
+    flat = 0
+    for t in nb.prange(tets.shape[0]):
+        p0 = points[tets[t, 0]]
+        a = points[tets[t, 1]] - p0
+        b = points[tets[t, 2]] - p0
+        c = points[tets[t, 3]] - p0
+        vol = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])
+        if vol < 0:
+            tmp = tets[t, 2]
+            tets[t, 2] = tets[t, 3]
+            tets[t, 3] = tmp
+        elif vol == 0:
+            flat += 1
+    return flat
+
+
+def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
+          cuts: CutEdges, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int64), unused points kept.
+
+    lattice_points: (V, 3) space positions of the lattice vertices; coords: (V, 3) their
+    lattice coordinates; tets: (T, 4) lattice tets; inside: (V,) class of each vertex;
+    cuts: the cut edges of these tets; targets: warp_targets(cuts, V, h).
+    Points V.. V+E-1 are the cut points (only those still on a +/- edge are used).
+    """
+    n_lattice = lattice_points.shape[0]
+    warped = targets >= 0
+    points = np.concatenate([lattice_points, cuts.points])
+    points[:n_lattice][warped] = cuts.points[targets[warped]]
+    signs = np.where(inside, 1, -1).astype(np.int8)
+    signs[warped] = 0
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    table_a, table_b, table_edge, bits = cuts.table
+    args = (tets, signs, inside, coords, points, table_a, table_b, table_edge, bits, n_lattice, PRISM_TETS)
+    n = _stencils(*args, np.empty((0, 4), dtype=np.int64), True)
+    out = np.empty((n, 4), dtype=np.int64)
+    _stencils(*args, out, False)
+    flat = _orient(points, out)
+    if flat:
+        raise AssertionError(f"stuffing produced {flat} flat tets")
+    return points, out
