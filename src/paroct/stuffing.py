@@ -228,7 +228,7 @@ def _emit(out, k, v0, v1, v2, v3):
 
 
 @nb.njit(cache=True)
-def _stencils(tets, signs, was_inside, coords, points, table_a, table_b, table_edge, bits, n_lattice, prism, out, count_only):
+def _stencils(tets, signs, coords, points, table_a, table_b, table_edge, bits, n_lattice, prism, out, count_only):
     """Stencil tets of every lattice tet; returns the number written (or needed, if count_only)."""
     k = 0
     plus = np.empty(4, dtype=np.int64)
@@ -251,16 +251,6 @@ def _stencils(tets, signs, was_inside, coords, points, table_a, table_b, table_e
                 zero[n_z] = v
                 n_z += 1
         if n_p == 0:
-            if n_z == 4:
-                # Every vertex on the surface: keep the tet where the lattice put it mostly inside.
-                n_in = 0
-                for i in range(4):
-                    if was_inside[tets[t, i]]:
-                        n_in += 1
-                if n_in >= 2:
-                    if not count_only:
-                        _emit(out, k, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
-                    k += 1
             continue
         if n_m == 0:
             if not count_only:
@@ -374,7 +364,7 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     signs[warped] = 0
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     table_a, table_b, table_edge, bits = cuts.table
-    args = (tets, signs, inside, coords, points, table_a, table_b, table_edge, bits, n_lattice, PRISM_TETS)
+    args = (tets, signs, coords, points, table_a, table_b, table_edge, bits, n_lattice, PRISM_TETS)
     n = _stencils(*args, np.empty((0, 4), dtype=np.int64), True)
     out = np.empty((n, 4), dtype=np.int64)
     _stencils(*args, out, False)
