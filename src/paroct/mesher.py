@@ -15,6 +15,7 @@ import numpy as np
 
 from . import rays
 from .errors import ParoctError
+from .features import ThinFeatures, thin_features
 from .frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
 from .lattice import leaf_tets
 from .octant import MAX_LEVEL
@@ -190,7 +191,48 @@ def mesh(
 
     _measure(points, out_tets, surface, report)
     stages.done("quality")
+    lost = _losses(report)
+    if lost:
+        for d in range(EDGE_DIRECTIONS.shape[0]):
+            if d not in crossings:
+                crossings[d] = rays.row_crossings(frame, snapped, faces, d)
+        advice = _thin_feature_advice(thin_features(frame, crossings, surface.vertices, faces), h)
+        if report.n_tets == 0:
+            raise ParoctError(f"no tets: the solid is thinner than size = {h:.4g} everywhere; {advice}")
+        report.warnings.append(f"{lost}; {advice}")
+        stages.done("features")
     return MeshResult(TetMesh(points, out_tets), report)
+
+
+#: Volume loss (relative) above which the mesh is said to have lost part of the solid.
+VOLUME_LOSS_WARNING = 0.01
+
+
+def _losses(report: MeshReport) -> str:
+    """What the mesh lost against the input, as one clause, or '' if nothing."""
+    lost = []
+    if report.volume_error < -VOLUME_LOSS_WARNING:
+        lost.append(f"the mesh lost {-100 * report.volume_error:.1f}% of the volume")
+    if report.boundary_components != report.input_components or report.boundary_genus != report.input_genus:
+        lost.append(
+            f"the boundary has {report.boundary_components} components and genus {report.boundary_genus} "
+            f"(input {report.input_components} and {report.input_genus})"
+        )
+    return " and ".join(lost)
+
+
+def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
+    """Names the thinnest wall and gap and a size that puts two element layers across them."""
+    found = []
+    smallest = np.inf
+    for walls, what in ((True, "wall"), (False, "gap")):
+        hit = features.thinnest(walls)
+        if hit is not None and hit[0] < 2 * h:
+            found.append(f"thinnest {what} {hit[0]:.4g} near ({hit[1][0]:.4g}, {hit[1][1]:.4g}, {hit[1][2]:.4g})")
+            smallest = min(smallest, hit[0])
+    if not found:
+        return f"no wall or gap thinner than 2 x size = {2 * h:.4g} was found; try a smaller size"
+    return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
