@@ -194,20 +194,45 @@ PRISM_TETS = _prism_triangulations()
 
 
 @nb.njit(cache=True, inline="always")
-def _quad_first_diagonal(coords, points, a, b, e, cut_ae, cut_be):
+def _bcc(coords, v, i):
+    """Coordinate i of lattice vertex v in doubled BCC coordinates y = 2 M u (integers;
+    all even on the cube grid, all odd at cube centres); see frame.LATTICE_TO_SPACE."""
+    u0 = coords[v, 0]
+    u1 = coords[v, 1]
+    u2 = coords[v, 2]
+    if i == 0:
+        return u0 + u1 - u2
+    if i == 1:
+        return -u0 + u1 + u2
+    return u0 - u1 + u2
+
+
+@nb.njit(cache=True, inline="always")
+def _is_long(coords, a, b):
+    """Edge ab is long (black: grid corner to corner or centre to centre) iff a and b have the same parity."""
+    return ((coords[a, 0] + coords[a, 1] + coords[a, 2] - coords[b, 0] - coords[b, 1] - coords[b, 2]) & 1) == 0
+
+
+@nb.njit(cache=True, inline="always")
+def _quad_first_diagonal(coords, a, b, e):
     """Diagonal of the quad (a, b, cut(b, e), cut(a, e)) on lattice face (a, b, e), a and b inside.
 
-    True: the diagonal joins a to cut(b, e); False: b to cut(a, e).  It depends on the face
-    alone, so the two lattice tets sharing the face split it the same way.
+    True: the diagonal joins a to cut(b, e); False: b to cut(a, e).  Labelle & Shewchuk's rule,
+    as in Epic's and Zheng's implementations: if ab is short, the diagonal joins the cut on the
+    face's long edge to the inside vertex off that edge; if ab is long, the parity rule: with k
+    the number of coordinates in which a exceeds cut(b, e), take a-cut(b, e) when k is odd for
+    an edge of grid corners, even for an edge of cube centres.  It depends on the face alone
+    (neighbouring tets agree) and not on where the cut lies on the open edge, so the exact
+    test compares 2a with b + e.
     """
-    da = 0.0
-    db = 0.0
-    for k in range(3):
-        da += (points[a, k] - points[cut_be, k]) ** 2
-        db += (points[b, k] - points[cut_ae, k]) ** 2
-    if da != db:
-        return da < db
-    return a < b
+    if not _is_long(coords, a, b):
+        return not _is_long(coords, a, e)
+    k = 0
+    for i in range(3):
+        if 2 * _bcc(coords, a, i) > _bcc(coords, b, i) + _bcc(coords, e, i):
+            k += 1
+    corners = ((coords[a, 0] + coords[a, 1] + coords[a, 2]) & 1) == 0
+    return (k & 1) == (1 if corners else 0)
 
 
 @nb.njit(cache=True)
@@ -228,7 +253,7 @@ def _emit(out, k, v0, v1, v2, v3):
 
 
 @nb.njit(cache=True)
-def _stencils(tets, signs, coords, points, table_a, table_b, table_edge, bits, n_lattice, prism, out, count_only):
+def _stencils(tets, signs, coords, table_a, table_b, table_edge, bits, n_lattice, prism, out, count_only):
     """Stencil tets of every lattice tet; returns the number written (or needed, if count_only)."""
     k = 0
     plus = np.empty(4, dtype=np.int64)
@@ -275,7 +300,7 @@ def _stencils(tets, signs, coords, points, table_a, table_b, table_edge, bits, n
                 e = minus[0]
                 cae = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, e)
                 cbe = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, e)
-                if _quad_first_diagonal(coords, points, a, b, e, cae, cbe):
+                if _quad_first_diagonal(coords, a, b, e):
                     _emit(out, k, z, a, b, cbe)
                     _emit(out, k + 1, z, a, cbe, cae)
                 else:
@@ -298,18 +323,14 @@ def _stencils(tets, signs, coords, points, table_a, table_b, table_edge, bits, n
                 pv[5] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, d)
                 choice = 0
                 # quad 0 = (a, cut ac, cut bc, b): bit 0 clear joins a to cut bc.
-                if not _quad_first_diagonal(coords, points, a, b, c, pv[1], pv[4]):
+                if not _quad_first_diagonal(coords, a, b, c):
                     choice |= 1
                 # quad 2 = (cut ad, a, b, cut bd): bit 2 set joins a to cut bd.
-                if _quad_first_diagonal(coords, points, a, b, d, pv[2], pv[5]):
+                if _quad_first_diagonal(coords, a, b, d):
                     choice |= 4
-                # quad 1 is the cut surface, free: any non-cyclic choice, the shorter diagonal if both are.
-                d0 = 0.0
-                d1 = 0.0
-                for i in range(3):
-                    d0 += (points[pv[1], i] - points[pv[5], i]) ** 2
-                    d1 += (points[pv[2], i] - points[pv[4], i]) ** 2
-                if prism[choice, 0, 0] < 0 or (prism[choice | 2, 0, 0] >= 0 and d1 < d0):
+                # quad 1 lies on the cut surface; the two lattice faces' diagonals leave one
+                # non-cyclic choice for it (the rule always crosses them).
+                if prism[choice, 0, 0] < 0:
                     choice |= 2
             else:
                 for i in range(3):
@@ -318,10 +339,10 @@ def _stencils(tets, signs, coords, points, table_a, table_b, table_edge, bits, n
                 choice = 0
                 for i in range(3):
                     j = (i + 1) % 3
-                    if not _quad_first_diagonal(coords, points, pv[i], pv[j], minus[0], pv[3 + i], pv[3 + j]):
+                    if not _quad_first_diagonal(coords, pv[i], pv[j], minus[0]):
                         choice |= 1 << i
             if prism[choice, 0, 0] < 0:
-                choice = choice ^ 1  # cyclic: never for the parity rule; flip one diagonal to stay valid
+                raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
             for i in range(3):
                 _emit(out, k + i, pv[prism[choice, i, 0]], pv[prism[choice, i, 1]], pv[prism[choice, i, 2]], pv[prism[choice, i, 3]])
         k += 3
@@ -364,7 +385,7 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     signs[warped] = 0
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     table_a, table_b, table_edge, bits = cuts.table
-    args = (tets, signs, coords, points, table_a, table_b, table_edge, bits, n_lattice, PRISM_TETS)
+    args = (tets, signs, coords, table_a, table_b, table_edge, bits, n_lattice, PRISM_TETS)
     n = _stencils(*args, np.empty((0, 4), dtype=np.int64), True)
     out = np.empty((n, 4), dtype=np.int64)
     _stencils(*args, out, False)

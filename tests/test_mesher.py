@@ -1,0 +1,153 @@
+"""End-to-end properties of paroct.mesh on the bundled parts and constructed solids."""
+
+from pathlib import Path
+
+import manifold3d
+import numpy as np
+import pytest
+
+from paroct import rays
+from paroct.errors import ParoctError
+from paroct.frame import X_AXIS_DIRECTION, fat_frame
+from paroct.lattice import leaf_tets
+from paroct.mesher import mesh
+from paroct.octree import octant_lattice_anchors, uniform_leaves
+from paroct.quality import tet_dihedral_angles, tet_quality
+from paroct.stuffing import PRISM_TETS
+from paroct.surface import load_surface
+from paroct.topology import boundary_faces, match_faces, surface_topology
+
+DATA = Path(__file__).resolve().parent.parent / "data"
+FAT_RATIO = 3 / np.sqrt(10)  # = (3/2) sqrt(2/5) = 0.948683; '3 sqrt(2/5)' is a misprint
+LS_MIN, LS_MAX = 10.7, 164.8
+
+
+def _assert_valid(points, tets, surface):
+    q = tet_quality(points, tets)
+    assert q.volume.min() > 0, "inverted or flat tet"
+    neighbour, overloaded, same_side = match_faces(tets)
+    assert overloaded == 0 and same_side == 0, "non-conforming"
+    faces = boundary_faces(tets, neighbour)
+    topo = surface_topology(faces, points.shape[0])
+    assert topo.manifold, f"boundary not a closed manifold: {topo}"
+    assert LS_MIN <= q.min_dihedral.min() and q.max_dihedral.max() <= LS_MAX
+    # Tets away from the boundary are exactly Todd's fat tet.
+    on_boundary = np.zeros(points.shape[0], dtype=bool)
+    on_boundary[faces.ravel()] = True
+    interior = ~on_boundary[tets].any(axis=1)
+    assert interior.sum() > 0
+    assert np.abs(q.radius_ratio[interior] - FAT_RATIO).max() < 1e-9
+    angles = tet_dihedral_angles(points, tets[interior])
+    assert np.all((np.abs(angles - 60) < 1e-7) | (np.abs(angles - 90) < 1e-7))
+    return faces, topo
+
+
+@pytest.mark.parametrize("name,divisions", [("angle_block", 40), ("xyz_cube", 40), ("bunny", 40), ("bunny", 80)])
+def test_bundled_parts_mesh_validly_with_proven_angles(name, divisions):
+    surface = load_surface(DATA / f"{name}.stl")
+    result = mesh(surface, divisions=divisions)
+    faces, topo = _assert_valid(result.mesh.points, result.mesh.tets, surface)
+    assert topo.genus == surface.genus and topo.components == surface.components
+    rep = result.report
+    assert rep.n_tets == result.mesh.tets.shape[0]
+    if divisions == 80:
+        assert abs(rep.volume_error) < 0.01
+
+
+def test_boundary_vertices_lie_on_the_input_surface():
+    surface = load_surface(DATA / "angle_block.stl")
+    result = mesh(surface, divisions=30)
+    neighbour, _, _ = match_faces(result.mesh.tets)
+    verts = np.unique(boundary_faces(result.mesh.tets, neighbour))
+    # Signed distance to the surface: angle_block is a union of planar faces; use manifold3d to
+    # measure: a tiny ball around each boundary vertex must meet both inside and outside.
+    solid = surface.manifold
+    x = result.mesh.points[verts]
+    eps = 1e-7 * surface.diagonal
+    for p in x[:: max(1, len(x) // 200)]:
+        hits_up = solid.ray_cast(p - [0, 0, eps], p + [0, 0, eps])
+        hits_x = solid.ray_cast(p - [eps, 0, 0], p + [eps, 0, 0])
+        hits_y = solid.ray_cast(p - [0, eps, 0], p + [0, eps, 0])
+        assert hits_up or hits_x or hits_y, f"boundary vertex {p} is off the surface"
+
+
+def test_box_mesh_volume_and_exact_faces():
+    # A box whose faces are not lattice-aligned: volume within stuffing's error, all angles proven.
+    box = manifold3d.Manifold.cube([1.0, 0.8, 0.6]).rotate([10, 20, 30])
+    surface = load_surface(box)
+    result = mesh(surface, size=0.05)
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+    assert abs(result.report.volume_error) < 0.01
+
+
+def test_classification_matches_manifold3d_ray_cast_reference():
+    surface = load_surface(DATA / "bunny.stl")
+    h = surface.diagonal / 30
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
+    keys, _ = uniform_leaves(frame, surface.bbox_min - h, surface.bbox_max + h, frame.levels)
+    coords, _ = leaf_tets(octant_lattice_anchors(keys, frame), np.ones(len(keys), dtype=np.int64))
+    snapped = rays.snap_surface(frame, surface.vertices)
+    inside = rays.winding_numbers(rays.row_crossings(frame, snapped, surface.faces.astype(np.int64), X_AXIS_DIRECTION), coords) > 0
+    x = frame.to_space(coords)
+    start_x = surface.bbox_min[0] - 1.0
+    rng = np.random.default_rng(0)
+    for i in rng.choice(len(x), size=600, replace=False):
+        hits = surface.manifold.ray_cast([start_x, x[i, 1], x[i, 2]], x[i])
+        winding = sum(1 if hit.normal[0] < 0 else -1 for hit in hits)
+        assert (winding > 0) == inside[i]
+
+
+def test_overlapping_shells_are_unioned():
+    a = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    b = manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([0.5, 0.5, 0.5])
+    ma, mb = a.to_mesh64(), b.to_mesh64()
+    va, vb = np.asarray(ma.vert_properties)[:, :3], np.asarray(mb.vert_properties)[:, :3]
+    faces = np.vstack([np.asarray(ma.tri_verts), np.asarray(mb.tri_verts) + len(va)])
+    surface = load_surface((np.vstack([va, vb]), faces))
+    assert surface.volume == pytest.approx(2 - 0.125)
+    result = mesh(surface, size=0.05)
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+    assert result.report.mesh_volume == pytest.approx(1.875, rel=0.01)
+
+
+def test_meshing_is_deterministic():
+    surface = load_surface(DATA / "xyz_cube.stl")
+    a = mesh(surface, divisions=25).mesh
+    b = mesh(DATA / "xyz_cube.stl", divisions=25).mesh
+    assert np.array_equal(a.points, b.points) and np.array_equal(a.tets, b.tets)
+
+
+def test_thin_solid_warns_or_fails_with_advice():
+    # A 1 x 1 x 0.02 plate at size 0.05: nothing survives, and the error names the thickness.
+    plate = manifold3d.Manifold.cube([1.0, 1.0, 0.02])
+    with pytest.raises(ParoctError, match=r"thinnest wall 0\.02"):
+        mesh(plate, size=0.05)
+    # A block with a thin fin: the fin is lost, and the warning says so with a size that keeps it.
+    part = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + manifold3d.Manifold.cube([1.0, 0.03, 0.5]).translate([0, 0, 0.5])
+    result = mesh(part, size=0.1)
+    assert result.report.warnings and "thinnest wall" in result.report.warnings[0]
+    assert "size = 0.015" in result.report.warnings[0]
+
+
+def test_size_checks():
+    box = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    for bad in (0, -1, float("nan"), float("inf")):
+        with pytest.raises(ParoctError, match="size"):
+            mesh(box, size=bad)
+    with pytest.raises(ParoctError, match="GiB"):
+        mesh(box, size=1e-4)  # ~1.2e13 tets: refused before any work
+    with pytest.raises(ParoctError, match="GiB"):
+        mesh(box, size=0.05, max_memory=1000)
+
+
+def test_prism_table_tets_are_valid_for_a_convex_prism():
+    # Each non-cyclic diagonal choice splits a straight prism into three positive tets of total volume.
+    bottom = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    prism = np.vstack([bottom, bottom + [0.1, 0.2, 1.0]])
+    for choice in range(8):
+        table = PRISM_TETS[choice]
+        if choice in (0, 7):
+            assert (table < 0).all()
+            continue
+        vols = [np.linalg.det(prism[t[1:]] - prism[t[0]]) / 6 for t in table]
+        assert np.isclose(sum(abs(v) for v in vols), 0.5) and min(abs(v) for v in vols) > 0
