@@ -19,7 +19,11 @@ _FIB = np.uint64(0x9E3779B97F4A7C15)
 
 @nb.njit(cache=True, inline="always")
 def _slot(key, bits):
-    return np.int64((np.uint64(key) * _FIB) >> np.uint64(64 - bits))
+    # Morton keys of nearby vertices are close: keep their low bits (cache locality for leaves
+    # visited in Morton order) and fold the high bits in, so coarse vertices (keys with many
+    # trailing zeros) still spread over the table.
+    k = np.uint64(key)
+    return np.int64((k ^ (k >> np.uint64(bits)) ^ ((k * _FIB) >> np.uint64(64 - bits))) & np.uint64((1 << bits) - 1))
 
 
 @nb.njit(cache=True)
@@ -93,6 +97,25 @@ def _freudenthal_tets(corner_ids):
     return tets
 
 
+def number_corners(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Global vertex ids of leaf corners.
+
+    anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides.
+    Returns (corner_ids (L, 8) int32, corner c at anchor + side * CUBE_CORNERS[c];
+    vertex_coords (V, 3) int64 lattice units).
+    """
+    anchors = np.ascontiguousarray(anchors, dtype=np.int64)
+    sides = np.ascontiguousarray(sides, dtype=np.int64)
+    if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
+        raise ValueError(f"anchors.shape = {anchors.shape}, sides.shape = {sides.shape}; expected (L, 3) and (L,)")
+    return _number_corners(anchors, sides)
+
+
+def freudenthal_tets(corner_ids: np.ndarray) -> np.ndarray:
+    """The six positively oriented Freudenthal tets (6L, 4) int32 of leaves with corner_ids (L, 8)."""
+    return _freudenthal_tets(np.ascontiguousarray(corner_ids))
+
+
 def leaf_tets(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The six positively oriented Freudenthal tets of every leaf.
 
@@ -100,9 +123,5 @@ def leaf_tets(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.nd
     Returns (vertex_coords (V, 3) int64 lattice units, tets (6L, 4) int32), tets 6i..6i+5
     belonging to leaf i.
     """
-    anchors = np.ascontiguousarray(anchors, dtype=np.int64)
-    sides = np.ascontiguousarray(sides, dtype=np.int64)
-    if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
-        raise ValueError(f"anchors.shape = {anchors.shape}, sides.shape = {sides.shape}; expected (L, 3) and (L,)")
-    corner_ids, coords = _number_corners(anchors, sides)
-    return coords, _freudenthal_tets(corner_ids)
+    corner_ids, coords = number_corners(anchors, sides)
+    return coords, freudenthal_tets(corner_ids)

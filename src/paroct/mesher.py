@@ -17,14 +17,14 @@ from . import rays
 from .errors import ParoctError
 from .features import ThinFeatures, thin_features
 from .frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
-from .lattice import leaf_tets
+from .lattice import freudenthal_tets, number_corners
 from .octant import MAX_LEVEL
-from .octree import octant_lattice_anchors, uniform_leaves
+from .octree import octant_lattice_anchors, refine_to_level, touched_cells, uniform_leaves
 from .quality import tet_quality
-from .repair import remove_pinches
+from .repair import band_boundary, remove_pinches
 from .stuffing import CutEdges, _collect_cut_edges, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
-from .topology import boundary_faces, match_faces, surface_topology
+from .topology import surface_topology
 
 #: Default element size as a fraction of the bounding-box diagonal.
 DEFAULT_DIVISIONS = 40
@@ -165,19 +165,21 @@ def mesh(
     report.levels = frame.levels
     stages.done("frame")
 
-    keys, _ = uniform_leaves(frame, surface.bbox_min - h, surface.bbox_max + h, frame.levels)
-    anchors = octant_lattice_anchors(keys, frame)
-    stages.done("octree")
-
-    coords, tets = leaf_tets(anchors, np.ones(anchors.shape[0], dtype=np.int64))
-    stages.done("emit")
-
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+    keys = solid_leaves(frame, snapped, faces, crossings[X_AXIS_DIRECTION], surface)
+    anchors = octant_lattice_anchors(keys, frame)
+    stages.done("octree")
+
+    corner_ids, coords = number_corners(anchors, np.ones(anchors.shape[0], dtype=np.int64))
     inside = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords) > 0
-    tets = tets[inside[tets].any(axis=1)]
     stages.done("classify")
+
+    # Leaves with no inside corner hold only outside tets.
+    tets = freudenthal_tets(corner_ids[inside[corner_ids].any(axis=1)])
+    tets = tets[inside[tets].any(axis=1)]
+    stages.done("emit")
 
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report)
     stages.done("cut")
@@ -186,10 +188,13 @@ def mesh(
     points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
     stages.done("stuff")
 
-    points, out_tets = _repair_and_compact(points, out_tets, report)
+    core = np.zeros(points.shape[0], dtype=bool)
+    core[: coords.shape[0]] = inside & (targets < 0)
+    out_tets, report.repaired_tets = remove_pinches(out_tets, core)
     stages.done("repair")
 
-    _measure(points, out_tets, surface, report)
+    _measure(points, out_tets, core, surface, report)
+    points, out_tets = _compact(points, out_tets)
     stages.done("quality")
     lost = _losses(report)
     if lost:
@@ -235,6 +240,26 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
     return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 
+#: Octree levels between the cells sorted into surface / inside / outside and the leaves.
+COARSE_DEPTH = 2
+
+
+def solid_leaves(frame: FatFrame, snapped, faces, x_crossings: rays.RowCrossings, surface: Surface) -> np.ndarray:
+    """Sorted keys of the finest-level leaves that may hold inside tets.
+
+    Cells COARSE_DEPTH levels up that no triangle's bounding box meets lie wholly inside or
+    outside; one winding number at a corner decides, and outside cells are dropped.
+    """
+    h = frame.h
+    coarse_level = max(0, frame.levels - COARSE_DEPTH)
+    cells, _ = uniform_leaves(frame, surface.bbox_min - h, surface.bbox_max + h, coarse_level)
+    touched = np.isin(cells, touched_cells(frame, snapped, faces, rays.snap_bits(frame), coarse_level), assume_unique=True)
+    corners = octant_lattice_anchors(cells[~touched], frame)
+    keep = touched.copy()
+    keep[~touched] = rays.winding_numbers(x_crossings, corners) > 0
+    return refine_to_level(cells[keep], coarse_level, frame.levels)
+
+
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
     """Cut points of every lattice edge of the tets whose ends differ in class."""
     starts, ends, dirs, *table = _collect_cut_edges(np.ascontiguousarray(tets, dtype=np.int64), inside, coords)
@@ -252,25 +277,37 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
     return CutEdges(starts, ends, dirs, fracs, frame.to_space(u), tuple(table))
 
 
-def _repair_and_compact(points, tets, report):
-    tets, report.repaired_tets = remove_pinches(points.shape[0], tets)
+def _compact(points, tets):
+    """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order."""
     used = np.zeros(points.shape[0], dtype=bool)
     used[tets.ravel()] = True
     new_id = np.cumsum(used) - 1
     return np.ascontiguousarray(points[used]), new_id[tets].astype(np.int32)
 
 
-def _measure(points, tets, surface: Surface, report: MeshReport) -> None:
-    q = tet_quality(points, tets)
+def _measure(points, tets, core, surface: Surface, report: MeshReport) -> None:
+    """Quality, volume and boundary topology.  Core tets (all four vertices core) are untouched
+    lattice tets, so one measured core tet stands for all of them; the band is measured tet by tet."""
+    band, _, faces = band_boundary(tets, core)
+    band_q = tet_quality(points, tets[band])
+    n_core = int(tets.shape[0] - band.sum())
     report.n_tets = int(tets.shape[0])
-    report.n_vertices = int(points.shape[0])
+    used = np.zeros(points.shape[0], dtype=bool)
+    used[tets.ravel()] = True
+    report.n_vertices = int(used.sum())
+    mins, maxs, ratios, volume = [band_q.min_dihedral], [band_q.max_dihedral], [band_q.radius_ratio], band_q.volume.sum()
+    if n_core:
+        one = tet_quality(points, tets[~band][:1])
+        mins.append(one.min_dihedral)
+        maxs.append(one.max_dihedral)
+        ratios.append(one.radius_ratio)
+        volume += n_core * one.volume[0]
     if tets.shape[0]:
-        report.min_dihedral = float(q.min_dihedral.min())
-        report.max_dihedral = float(q.max_dihedral.max())
-        report.min_radius_ratio = float(q.radius_ratio.min())
-    report.mesh_volume = float(q.volume.sum())
-    neighbour, _, _ = match_faces(tets)
-    topo = surface_topology(boundary_faces(tets, neighbour), points.shape[0])
+        report.min_dihedral = float(min(m.min() for m in mins if m.size))
+        report.max_dihedral = float(max(m.max() for m in maxs if m.size))
+        report.min_radius_ratio = float(min(r.min() for r in ratios if r.size))
+    report.mesh_volume = float(volume)
+    topo = surface_topology(faces, points.shape[0])
     report.boundary_genus = topo.genus
     report.boundary_components = topo.components
     report.boundary_manifold = topo.manifold

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .frame import LATTICE_TO_SPACE, FatFrame
-from .octant import MAX_LEVEL, morton_decode, octant_is_ancestor, octant_last_key, octant_overlaps
+from .frame import FatFrame
+from .octant import MAX_LEVEL, morton_coords, morton_decode, morton_key, morton_keys, octant_is_ancestor, octant_last_key, octant_overlaps
 
 
 @nb.njit(cache=True)
@@ -68,26 +68,106 @@ def octant_lattice_anchors(keys: np.ndarray, frame: FatFrame) -> np.ndarray:
     return morton_decode(keys) >> (MAX_LEVEL - frame.levels)
 
 
+@nb.njit(cache=True)
+def _descend_to_box(lo, hi, frame_levels, level):
+    """Keys of the octants of ``level`` whose parallelepiped meets the box [lo, hi] (lattice-scaled
+    space coordinates), depth first with children in Morton order, so the output is sorted."""
+    shift = MAX_LEVEL - frame_levels
+    out = np.empty(1024, dtype=np.int64)
+    n = 0
+    stack_keys = np.empty(8 * (level + 1), dtype=np.int64)
+    stack_levels = np.empty(8 * (level + 1), dtype=np.int64)
+    stack_keys[0] = 0
+    stack_levels[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        key = stack_keys[top]
+        lev = stack_levels[top]
+        ax, ay, az = morton_coords(key)
+        ax >>= shift
+        ay >>= shift
+        az >>= shift
+        side = float(np.int64(1) << (frame_levels - lev))
+        # Each row of LATTICE_TO_SPACE is a permutation of (1/2, 1/2, -1/2): over the cube
+        # anchor + [0, side]^3 a space coordinate spans [c - side/2, c + side].
+        c0 = 0.5 * (ax + ay - az)
+        c1 = 0.5 * (-ax + ay + az)
+        c2 = 0.5 * (ax - ay + az)
+        if (c0 + side < lo[0] or c0 - side / 2 > hi[0] or c1 + side < lo[1] or c1 - side / 2 > hi[1]
+                or c2 + side < lo[2] or c2 - side / 2 > hi[2]):
+            continue
+        if lev == level:
+            if n == out.shape[0]:
+                out = np.concatenate((out, np.empty(n, dtype=np.int64)))
+            out[n] = key
+            n += 1
+            continue
+        step = 3 * (MAX_LEVEL - lev - 1)
+        for c in range(7, -1, -1):
+            stack_keys[top] = key | (np.int64(c) << step)
+            stack_levels[top] = lev + 1
+            top += 1
+    return out[:n].copy()
+
+
 def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
     """All octants of ``level`` whose parallelepiped meets the space box, as a sorted linear octree.
 
-    Descends from the root keeping the octants whose image bounding box meets the box;
-    children of a sorted array, appended in child order, stay sorted.
     Returns (keys (N,) int64, levels (N,) int8).
     """
     if not 0 <= level <= frame.levels:
         raise ValueError(f"level = {level} is outside 0..{frame.levels}")
     lo = (np.asarray(box_min, dtype=np.float64) - frame.origin) / frame.h
     hi = (np.asarray(box_max, dtype=np.float64) - frame.origin) / frame.h
-    keys = np.zeros(1, dtype=np.int64)
-    child = np.arange(8, dtype=np.int64)
-    for lev in range(1, level + 1):
-        keys = (keys[:, None] | (child[None, :] << (3 * (MAX_LEVEL - lev)))).ravel()
-        side = float(1 << (frame.levels - lev))
-        anchors = (morton_decode(keys) >> (MAX_LEVEL - frame.levels)).astype(np.float64)
-        centre = anchors @ LATTICE_TO_SPACE.T
-        # Each row of LATTICE_TO_SPACE has entries (1/2, 1/2, -1/2) in some order:
-        # over the cube anchor + [0, side]^3 a space coordinate spans [c - side/2, c + side].
-        meets = np.all((centre + side >= lo) & (centre - side / 2 <= hi), axis=1)
-        keys = keys[meets]
+    keys = _descend_to_box(lo, hi, frame.levels, level)
     return keys, np.full(keys.shape[0], level, dtype=np.int8)
+
+
+@nb.njit(cache=True)
+def _touched_cell_keys(lo, hi, cell_bits):
+    """Morton keys (octree coordinates) of the cells of side 2**cell_bits (lattice units) meeting
+    each closed box [lo[i], hi[i]] (lattice units, int64), with repeats."""
+    n = lo.shape[0]
+    out = np.empty(8 * n + 16, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        x0 = lo[i, 0] >> cell_bits
+        y0 = lo[i, 1] >> cell_bits
+        z0 = lo[i, 2] >> cell_bits
+        x1 = hi[i, 0] >> cell_bits
+        y1 = hi[i, 1] >> cell_bits
+        z1 = hi[i, 2] >> cell_bits
+        for z in range(z0, z1 + 1):
+            for y in range(y0, y1 + 1):
+                for x in range(x0, x1 + 1):
+                    if m == out.shape[0]:
+                        out = np.concatenate((out, np.empty(m, dtype=np.int64)))
+                    out[m] = morton_key(x << cell_bits, y << cell_bits, z << cell_bits)
+                    m += 1
+    return out[:m].copy()
+
+
+def touched_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> np.ndarray:
+    """Sorted keys of the octants of ``level`` that a triangle's bounding box meets (closed boxes).
+
+    snapped: (V, 3) int64 surface vertices in lattice units * 2**snap_bits.  An octant not
+    listed contains no surface point, so all its points have one inside/outside class.
+    """
+    tri = snapped[faces]
+    lo = tri.min(axis=1) >> snap_bits
+    hi = tri.max(axis=1) >> snap_bits
+    hi += (tri.max(axis=1) & ((1 << snap_bits) - 1)) == 0  # a max exactly on a lattice plane touches the next cell too
+    keys = _touched_cell_keys(lo, hi, frame.levels - level)
+    return np.unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+
+
+def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndarray:
+    """All descendants at ``level_to`` of sorted octants at ``level_from``, sorted."""
+    depth = level_to - level_from
+    if depth < 0:
+        raise ValueError(f"level_to = {level_to} < level_from = {level_from}")
+    n = 1 << depth
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 3)
+    offsets = np.sort(morton_keys(g << (MAX_LEVEL - level_to)))
+    return (keys[:, None] | offsets[None, :]).ravel()

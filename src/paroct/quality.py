@@ -15,83 +15,80 @@ import numpy as np
 
 #: The six edges of a tet as vertex pairs, and for each the two vertices off it.
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
-_OFF_EDGE = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]], dtype=np.int64)
 
 
 @nb.njit(cache=True, inline="always")
-def _sub(p, q):
-    return (p[0] - q[0], p[1] - q[1], p[2] - q[2])
+def _dihedral(nk0, nk1, nk2, lk, nm0, nm1, nm2, lm):
+    """Dihedral angle (degrees) between the faces with outward normals nk, nm (lengths lk, lm)."""
+    if lk == 0.0 or lm == 0.0:
+        return 0.0
+    c = -(nk0 * nm0 + nk1 * nm1 + nk2 * nm2) / (lk * lm)
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
 @nb.njit(cache=True, inline="always")
-def _cross(u, v):
-    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-
-
-@nb.njit(cache=True, inline="always")
-def _dot(u, v):
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+def _measure_tet(points, tets, t, angles):
+    """Signed volume, 3r/R, and the six dihedral angles (written to angles[0:6], TET_EDGES order)."""
+    a = tets[t, 0]
+    b = tets[t, 1]
+    c = tets[t, 2]
+    d = tets[t, 3]
+    ax, ay, az = points[a, 0], points[a, 1], points[a, 2]
+    bx, by, bz = points[b, 0] - ax, points[b, 1] - ay, points[b, 2] - az
+    cx, cy, cz = points[c, 0] - ax, points[c, 1] - ay, points[c, 2] - az
+    dx, dy, dz = points[d, 0] - ax, points[d, 1] - ay, points[d, 2] - az
+    # Outward normals of the faces opposite vertices 0..3 (for positive volume).
+    ex, ey, ez = cx - bx, cy - by, cz - bz
+    fx, fy, fz = dx - bx, dy - by, dz - bz
+    n0x, n0y, n0z = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+    n1x, n1y, n1z = dy * cz - dz * cy, dz * cx - dx * cz, dx * cy - dy * cx
+    n2x, n2y, n2z = by * dz - bz * dy, bz * dx - bx * dz, bx * dy - by * dx
+    n3x, n3y, n3z = cy * bz - cz * by, cz * bx - cx * bz, cx * by - cy * bx
+    vol = -(n3x * dx + n3y * dy + n3z * dz) / 6.0
+    l0 = math.sqrt(n0x * n0x + n0y * n0y + n0z * n0z)
+    l1 = math.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
+    l2 = math.sqrt(n2x * n2x + n2y * n2y + n2z * n2z)
+    l3 = math.sqrt(n3x * n3x + n3y * n3y + n3z * n3z)
+    # Edge (i, j) lies between the faces opposite the other two vertices.
+    angles[0] = _dihedral(n2x, n2y, n2z, l2, n3x, n3y, n3z, l3)  # 01
+    angles[1] = _dihedral(n1x, n1y, n1z, l1, n3x, n3y, n3z, l3)  # 02
+    angles[2] = _dihedral(n1x, n1y, n1z, l1, n2x, n2y, n2z, l2)  # 03
+    angles[3] = _dihedral(n0x, n0y, n0z, l0, n3x, n3y, n3z, l3)  # 12
+    angles[4] = _dihedral(n0x, n0y, n0z, l0, n2x, n2y, n2z, l2)  # 13
+    angles[5] = _dihedral(n0x, n0y, n0z, l0, n1x, n1y, n1z, l1)  # 23
+    area = 0.5 * (l0 + l1 + l2 + l3)
+    # Opposite edge pairs (01, 23), (02, 13), (03, 12).
+    l01 = math.sqrt(bx * bx + by * by + bz * bz)
+    l02 = math.sqrt(cx * cx + cy * cy + cz * cz)
+    l03 = math.sqrt(dx * dx + dy * dy + dz * dz)
+    l12 = math.sqrt(ex * ex + ey * ey + ez * ez)
+    l13 = math.sqrt(fx * fx + fy * fy + fz * fz)
+    gx, gy, gz = dx - cx, dy - cy, dz - cz
+    l23 = math.sqrt(gx * gx + gy * gy + gz * gz)
+    p = l01 * l23
+    q = l02 * l13
+    r = l03 * l12
+    prod = (p + q + r) * (p + q - r) * (p - q + r) * (-p + q + r)
+    if vol <= 0.0 or prod <= 0.0 or area == 0.0:
+        ratio = 0.0
+    else:
+        ratio = 3.0 * (3.0 * vol / area) / (math.sqrt(prod) / (24.0 * vol))
+    return vol, ratio
 
 
 @nb.njit(cache=True, parallel=True)
 def _tet_quality(points, tets, volume, radius_ratio, min_dihedral, max_dihedral):
     for t in nb.prange(tets.shape[0]):
-        p = (points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
-        e01 = _sub(p[1], p[0])
-        e02 = _sub(p[2], p[0])
-        e03 = _sub(p[3], p[0])
-        vol = _dot(_cross(e01, e02), e03) / 6.0
+        angles = np.empty(6)
+        vol, ratio = _measure_tet(points, tets, t, angles)
         volume[t] = vol
-        # Outward-ish face normals n_k of the face opposite vertex k (orientation-consistent).
-        n0 = _cross(_sub(p[2], p[1]), _sub(p[3], p[1]))
-        n1 = _cross(_sub(p[3], p[0]), _sub(p[2], p[0]))
-        n2 = _cross(_sub(p[1], p[0]), _sub(p[3], p[0]))
-        n3 = _cross(_sub(p[2], p[0]), _sub(p[1], p[0]))
-        normals = (n0, n1, n2, n3)
-        area = 0.0
-        norms = np.empty(4)
-        for k in range(4):
-            norms[k] = math.sqrt(_dot(normals[k], normals[k]))
-            area += 0.5 * norms[k]
-        lo = 180.0
-        hi = 0.0
-        for e in range(6):
-            k = _OFF_EDGE[e, 0]
-            m = _OFF_EDGE[e, 1]
-            # The dihedral angle at edge e lies between the faces opposite its two off-edge vertices.
-            if norms[k] == 0.0 or norms[m] == 0.0:
-                ang = 0.0
-            else:
-                c = -_dot(normals[k], normals[m]) / (norms[k] * norms[m])
-                c = min(1.0, max(-1.0, c))
-                ang = math.degrees(math.acos(c))
-            lo = min(lo, ang)
-            hi = max(hi, ang)
+        radius_ratio[t] = ratio
         if vol <= 0.0:
-            lo = 0.0
-            hi = 180.0
-        min_dihedral[t] = lo
-        max_dihedral[t] = hi
-        # Opposite edge pairs (01, 23), (02, 13), (03, 12).
-        l01 = math.sqrt(_dot(e01, e01))
-        l02 = math.sqrt(_dot(e02, e02))
-        l03 = math.sqrt(_dot(e03, e03))
-        d12 = _sub(p[2], p[1])
-        d13 = _sub(p[3], p[1])
-        d23 = _sub(p[3], p[2])
-        l12 = math.sqrt(_dot(d12, d12))
-        l13 = math.sqrt(_dot(d13, d13))
-        l23 = math.sqrt(_dot(d23, d23))
-        a = l01 * l23
-        b = l02 * l13
-        c = l03 * l12
-        prod = (a + b + c) * (a + b - c) * (a - b + c) * (-a + b + c)
-        if vol <= 0.0 or prod <= 0.0 or area == 0.0:
-            radius_ratio[t] = 0.0
+            min_dihedral[t] = 0.0
+            max_dihedral[t] = 180.0
         else:
-            circum = math.sqrt(prod) / (24.0 * vol)
-            inr = 3.0 * vol / area
-            radius_ratio[t] = 3.0 * inr / circum
+            min_dihedral[t] = angles.min()
+            max_dihedral[t] = angles.max()
 
 
 @dataclass(frozen=True)
@@ -119,23 +116,7 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> TetQuality:
 @nb.njit(cache=True)
 def tet_dihedral_angles(points, tets):
     """All six dihedral angles (M, 6) float64 in degrees, edge order TET_EDGES."""
-    m = tets.shape[0]
-    out = np.empty((m, 6))
-    for t in range(m):
-        p = (points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
-        n0 = _cross(_sub(p[2], p[1]), _sub(p[3], p[1]))
-        n1 = _cross(_sub(p[3], p[0]), _sub(p[2], p[0]))
-        n2 = _cross(_sub(p[1], p[0]), _sub(p[3], p[0]))
-        n3 = _cross(_sub(p[2], p[0]), _sub(p[1], p[0]))
-        normals = (n0, n1, n2, n3)
-        for e in range(6):
-            k = _OFF_EDGE[e, 0]
-            m2 = _OFF_EDGE[e, 1]
-            nk = math.sqrt(_dot(normals[k], normals[k]))
-            nm = math.sqrt(_dot(normals[m2], normals[m2]))
-            if nk == 0.0 or nm == 0.0:
-                out[t, e] = 0.0
-            else:
-                c = min(1.0, max(-1.0, -_dot(normals[k], normals[m2]) / (nk * nm)))
-                out[t, e] = math.degrees(math.acos(c))
+    out = np.empty((tets.shape[0], 6))
+    for t in range(tets.shape[0]):
+        _measure_tet(points, tets, t, out[t])
     return out

@@ -79,15 +79,39 @@ def _split_stars(tets, neighbour, bad):
     return remove
 
 
-def remove_pinches(n_points: int, tets: np.ndarray) -> tuple[np.ndarray, int]:
-    """Tets (M', 4) whose boundary is a closed 2-manifold, and the number of tets removed."""
+def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boundary faces of a stuffed mesh from its band alone.
+
+    core: (V,) True for vertices all of whose faces are interior (unwarped inside lattice
+    vertices: every lattice face through three of them is kept by the stencils on both
+    sides).  Only tets with a non-core vertex, the band, can then have boundary faces.
+    Returns (band (M,) mask, band face neighbours (B, 4) indexing tets[band], boundary faces (F, 3)).
+    """
+    band = ~core[tets].all(axis=1)
+    band_tets = np.ascontiguousarray(tets[band])
+    neighbour, _, _ = match_faces(band_tets)
+    faces = boundary_faces(band_tets, neighbour)
+    faces = faces[~core[faces].all(axis=1)]
+    return band, neighbour, np.ascontiguousarray(faces)
+
+
+def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int]:
+    """Tets (M', 4) whose boundary is a closed 2-manifold, and the number of tets removed.
+
+    core: see band_boundary; vertices of removed tets leave the core (their faces may now
+    be boundary), so pass a copy if the caller's mask must not change.
+    """
     removed = 0
     for _ in range(MAX_ROUNDS):
-        neighbour, _, _ = match_faces(tets)
-        bad = nonmanifold_vertices(np.ascontiguousarray(boundary_faces(tets, neighbour)), n_points)
+        band, neighbour, faces = band_boundary(tets, core)
+        bad = nonmanifold_vertices(faces, core.shape[0])
         if not bad.any():
             return tets, removed
-        drop = _split_stars(tets, neighbour, bad)
+        band_tets = np.ascontiguousarray(tets[band])
+        drop_band = _split_stars(band_tets, neighbour, bad)
+        drop = np.zeros(tets.shape[0], dtype=bool)
+        drop[np.nonzero(band)[0][drop_band]] = True
+        core[tets[drop].ravel()] = False
         removed += int(drop.sum())
         tets = tets[~drop]
     raise AssertionError(f"boundary still non-manifold after {MAX_ROUNDS} rounds of pinch removal")
