@@ -4,7 +4,8 @@ Where the solid is thinner than the lattice resolves, stuffing can leave two par
 the mesh touching at a single vertex or edge.  Such a vertex's star (the tets around it)
 splits into pieces joined only through it; we keep the largest piece.  A vertex whose
 star is one piece but whose boundary link is not one fan (an annulus: the surface passes
-through it twice) loses its whole star.  Repeat until no such vertex is left.  Every
+through it twice) loses its whole star.  The vertices of removed tets are checked again,
+until no bad vertex is left (each step removes tets, so it ends).  Every
 removal is counted and reported; the caller warns when volume or topology changed.
 """
 
@@ -13,70 +14,145 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .topology import TET_FACES as _FACES
 from .topology import boundary_faces, match_faces, nonmanifold_vertices
 
-#: Give up after this many rounds (each round removes tets, so it always terminates).
-MAX_ROUNDS = 64
+@nb.njit(cache=True)
+def _vertex_tets(tets, n_vertices):
+    """CSR of the tets around each vertex: (offsets (V+1,), tet ids)."""
+    deg = np.zeros(n_vertices + 1, dtype=np.int64)
+    for t in range(tets.shape[0]):
+        for i in range(4):
+            deg[tets[t, i] + 1] += 1
+    for v in range(n_vertices):
+        deg[v + 1] += deg[v]
+    ids = np.empty(deg[n_vertices], dtype=np.int64)
+    fill = deg[:-1].copy()
+    for t in range(tets.shape[0]):
+        for i in range(4):
+            v = tets[t, i]
+            ids[fill[v]] = t
+            fill[v] += 1
+    return deg, ids
 
 
 @nb.njit(cache=True)
-def _split_stars(tets, neighbour, bad):
-    """Mask (M,) of tets to remove around the bad vertices."""
-    m = tets.shape[0]
-    n_vertices = bad.shape[0]
-    deg = np.zeros(n_vertices + 1, dtype=np.int64)
-    for t in range(m):
-        for i in range(4):
-            if bad[tets[t, i]]:
-                deg[tets[t, i] + 1] += 1
-    for v in range(n_vertices):
-        deg[v + 1] += deg[v]
-    star = np.empty(deg[n_vertices], dtype=np.int64)
-    fill = deg[:-1].copy()
-    for t in range(m):
-        for i in range(4):
-            v = tets[t, i]
-            if bad[v]:
-                star[fill[v]] = t
-                fill[v] += 1
-    remove = np.zeros(m, dtype=np.bool_)
-    for v in range(n_vertices):
-        lo = deg[v]
-        hi = deg[v + 1]
-        if hi == lo:
-            continue
-        n = hi - lo
-        label = np.arange(n)
-        # Union the star's tets across their faces through v (the face opposite v excluded).
-        changed = True
-        while changed:
-            changed = False
-            for i in range(n):
-                t = star[lo + i]
-                for k in range(4):
-                    if tets[t, k] == v:
-                        continue
-                    o = neighbour[t, k]
-                    if o < 0:
-                        continue
-                    for j in range(n):
-                        if star[lo + j] == o and label[j] != label[i]:
-                            lab = min(label[i], label[j])
-                            label[i] = lab
-                            label[j] = lab
-                            changed = True
-        sizes = np.zeros(n, dtype=np.int64)
-        for i in range(n):
-            sizes[label[i]] += 1
-        keep = np.argmax(sizes)
-        if sizes[keep] == n:
-            for i in range(n):
-                remove[star[lo + i]] = True
-        else:
-            for i in range(n):
-                if label[i] != keep:
-                    remove[star[lo + i]] = True
-    return remove
+def _repair_star(v, tets, neighbour, alive, offsets, ids, remove_out):
+    """Check vertex v; if its live boundary is not one fan, mark tets to remove in remove_out
+    (the star's pieces but the largest; the whole star if it is one piece).  Returns the count."""
+    lo = offsets[v]
+    hi = offsets[v + 1]
+    star = np.empty(hi - lo, dtype=np.int64)
+    n = 0
+    for i in range(lo, hi):
+        if alive[ids[i]]:
+            star[n] = ids[i]
+            n += 1
+    if n == 0:
+        return 0
+    # Boundary link edges p -> q from live boundary faces (v, p, q) of the star.
+    src = np.empty(3 * n, dtype=np.int64)
+    dst = np.empty(3 * n, dtype=np.int64)
+    m = 0
+    label = np.arange(n)
+    for i in range(n):
+        t = star[i]
+        for k in range(4):
+            if tets[t, k] == v:
+                continue
+            o = neighbour[t, k]
+            if o >= 0 and alive[o]:
+                for j in range(n):
+                    if star[j] == o and label[j] != label[i]:
+                        old = max(label[i], label[j])
+                        new = min(label[i], label[j])
+                        for r in range(n):
+                            if label[r] == old:
+                                label[r] = new
+                continue
+            # Face k (opposite vertex k) is on the boundary; orient it outward, rotate v first.
+            f0 = tets[t, _FACES[k, 0]]
+            f1 = tets[t, _FACES[k, 1]]
+            f2 = tets[t, _FACES[k, 2]]
+            if f0 == v:
+                src[m] = f1
+                dst[m] = f2
+            elif f1 == v:
+                src[m] = f2
+                dst[m] = f0
+            else:
+                src[m] = f0
+                dst[m] = f1
+            m += 1
+    if m == 0:
+        return 0
+    ok = True
+    for i in range(m):
+        for j in range(i + 1, m):
+            if src[i] == src[j]:
+                ok = False
+    if ok:
+        cur = src[0]
+        steps = 0
+        while True:
+            found = -1
+            for i in range(m):
+                if src[i] == cur:
+                    found = i
+            if found < 0:
+                ok = False
+                break
+            cur = dst[found]
+            steps += 1
+            if cur == src[0] or steps > m:
+                break
+        ok = ok and steps == m and cur == src[0]
+    if ok:
+        return 0
+    sizes = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        sizes[label[i]] += 1
+    keep = np.argmax(sizes)
+    count = 0
+    for i in range(n):
+        if sizes[keep] == n or label[i] != keep:
+            remove_out[count] = star[i]
+            count += 1
+    return count
+
+
+@nb.njit(cache=True)
+def _repair(tets, neighbour, bad_vertices, n_vertices):
+    """Worklist repair: check the bad vertices, remove tets, re-check the vertices they had."""
+    offsets, ids = _vertex_tets(tets, n_vertices)
+    alive = np.ones(tets.shape[0], dtype=np.bool_)
+    queued = np.zeros(n_vertices, dtype=np.bool_)
+    work = np.empty(bad_vertices.shape[0] + 16, dtype=np.int64)
+    top = 0
+    for v in bad_vertices:
+        work[top] = v
+        top += 1
+        queued[v] = True
+    buf = np.empty(np.int64(np.max(offsets[1:] - offsets[:-1])) + 1, dtype=np.int64)
+    while top > 0:
+        top -= 1
+        v = work[top]
+        queued[v] = False
+        count = _repair_star(v, tets, neighbour, alive, offsets, ids, buf)
+        for i in range(count):
+            t = buf[i]
+            if not alive[t]:
+                continue
+            alive[t] = False
+            for j in range(4):
+                w = tets[t, j]
+                if not queued[w]:
+                    if top == work.shape[0]:
+                        work = np.concatenate((work, np.empty(top, dtype=np.int64)))
+                    work[top] = w
+                    top += 1
+                    queued[w] = True
+    return alive
 
 
 def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -98,20 +174,19 @@ def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.nd
 def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int]:
     """Tets (M', 4) whose boundary is a closed 2-manifold, and the number of tets removed.
 
-    core: see band_boundary; vertices of removed tets leave the core (their faces may now
-    be boundary), so pass a copy if the caller's mask must not change.
+    The band check finds the bad vertices cheaply; only if there are any is the full face
+    adjacency built for the local worklist repair.  core: see band_boundary; vertices of
+    removed tets leave it.
     """
-    removed = 0
-    for _ in range(MAX_ROUNDS):
-        band, neighbour, faces = band_boundary(tets, core)
-        bad = nonmanifold_vertices(faces, core.shape[0])
-        if not bad.any():
-            return tets, removed
-        band_tets = np.ascontiguousarray(tets[band])
-        drop_band = _split_stars(band_tets, neighbour, bad)
-        drop = np.zeros(tets.shape[0], dtype=bool)
-        drop[np.nonzero(band)[0][drop_band]] = True
-        core[tets[drop].ravel()] = False
-        removed += int(drop.sum())
-        tets = tets[~drop]
-    raise AssertionError(f"boundary still non-manifold after {MAX_ROUNDS} rounds of pinch removal")
+    _, _, faces = band_boundary(tets, core)
+    bad = np.nonzero(nonmanifold_vertices(faces, core.shape[0]))[0]
+    if bad.size == 0:
+        return tets, 0
+    tets = np.ascontiguousarray(tets)
+    neighbour, _, _ = match_faces(tets)
+    alive = _repair(tets, neighbour, bad, core.shape[0])
+    core[tets[~alive].ravel()] = False
+    _, _, faces = band_boundary(tets[alive], core)
+    if nonmanifold_vertices(faces, core.shape[0]).any():
+        raise AssertionError("pinch repair left a non-manifold boundary vertex")
+    return tets[alive], int((~alive).sum())

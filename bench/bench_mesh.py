@@ -1,0 +1,89 @@
+"""Per-model benchmark of paroct.mesh: tets, time per stage, throughput, quality, accuracy.
+
+    python bench/bench_mesh.py [FOLDER] [--divisions 40 80 160] [--no-hausdorff]
+
+FOLDER defaults to ../shared/data/corpus.  Numba compilation is excluded: a small warm-up
+mesh compiles (or loads from cache) every kernel first.  Prints one row per model and
+size, then the throughput at the finest size (whole mesh() call, surface already loaded).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import paroct
+from paroct.errors import ParoctError
+from paroct.surface import load_surface
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder", nargs="?", default=str(ROOT.parent / "shared" / "data" / "corpus"))
+    ap.add_argument("--divisions", type=float, nargs="+", default=[40, 80, 160])
+    ap.add_argument("--no-hausdorff", action="store_true", help="skip the (slower) two-sided Hausdorff distance")
+    args = ap.parse_args(argv)
+    files = sorted(Path(args.folder).glob("*.stl")) + sorted(Path(args.folder).glob("*.obj")) + sorted(Path(args.folder).glob("*.off"))
+    if not files:
+        print(f"no surfaces in {args.folder}", file=sys.stderr)
+        return 2
+    paroct.mesh(ROOT / "data" / "xyz_cube.stl", divisions=10)  # compile or load the numba cache
+    check_mesh = None
+    if not args.no_hausdorff:
+        try:
+            from paroct.check import check_mesh
+        except ImportError:
+            pass
+
+    stages = ["octree", "classify", "emit", "cut", "stuff", "repair", "quality"]
+    head = (f"{'model':12s} {'div':>4s} {'tets':>9s} {'verts':>8s} {'sec':>6s} {'Mtet/s':>6s} "
+            + " ".join(f"{s[:6]:>6s}" for s in stages)
+            + f" {'mindih':>6s} {'maxdih':>6s} {'min3rR':>6s} {'volerr%':>7s} {'haus/d':>8s}  note")
+    print(head)
+    finest = max(args.divisions)
+    rates = []
+    for f in files:
+        surface = load_surface(f)
+        for div in args.divisions:
+            t = time.perf_counter()
+            try:
+                result = paroct.mesh(surface, divisions=div)
+            except ParoctError as exc:
+                print(f"{f.stem:12s} {div:4.0f} error: {exc}")
+                continue
+            sec = time.perf_counter() - t
+            rep = result.report
+            rate = rep.n_tets / sec / 1e6
+            if div == finest:
+                rates.append(rate)
+            haus = float("nan")
+            if check_mesh is not None:
+                haus = check_mesh(result.mesh.points, result.mesh.tets, surface).hausdorff
+            note = "warn: " + rep.warnings[0][:60] if rep.warnings else ""
+            print(f"{f.stem:12s} {div:4.0f} {rep.n_tets:9d} {rep.n_vertices:8d} {sec:6.2f} {rate:6.2f} "
+                  + " ".join(f"{rep.stage_seconds.get(s, 0.0):6.3f}" for s in stages)
+                  + f" {rep.min_dihedral:6.2f} {rep.max_dihedral:6.2f} {rep.min_radius_ratio:6.3f}"
+                  f" {100 * rep.volume_error:7.2f} {haus:8.2e}  {note}")
+            sys.stdout.flush()
+    if rates:
+        print(f"\nthroughput at diag/{finest:.0f}: median {np.median(rates):.2f} M tets/s, min {min(rates):.2f}, max {max(rates):.2f}"
+              f" (whole mesh() call, 1 process, numba threads = {paroct_threads()})")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
+    return 0
+
+
+def paroct_threads() -> int:
+    import numba
+
+    return numba.get_num_threads()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
