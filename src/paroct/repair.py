@@ -122,8 +122,12 @@ def _repair_star(v, tets, neighbour, alive, offsets, ids, remove_out):
 
 
 @nb.njit(cache=True)
-def _repair(tets, neighbour, bad_vertices, n_vertices):
-    """Worklist repair: check the bad vertices, remove tets, re-check the vertices they had."""
+def _repair(tets, neighbour, bad_vertices, n_vertices, complete):
+    """Worklist repair: check the bad vertices, remove tets, re-check the vertices they had.
+
+    complete: (V,) True where the vertex's whole star is among tets.  Returns (alive (M,) mask,
+    ok): ok is False if the work reached a vertex with an incomplete star (nothing is trusted then).
+    """
     offsets, ids = _vertex_tets(tets, n_vertices)
     alive = np.ones(tets.shape[0], dtype=np.bool_)
     queued = np.zeros(n_vertices, dtype=np.bool_)
@@ -138,6 +142,8 @@ def _repair(tets, neighbour, bad_vertices, n_vertices):
         top -= 1
         v = work[top]
         queued[v] = False
+        if not complete[v]:
+            return alive, False
         count = _repair_star(v, tets, neighbour, alive, offsets, ids, buf)
         for i in range(count):
             t = buf[i]
@@ -152,7 +158,7 @@ def _repair(tets, neighbour, bad_vertices, n_vertices):
                     work[top] = w
                     top += 1
                     queued[w] = True
-    return alive
+    return alive, True
 
 
 def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -183,8 +189,20 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int]
     if bad.size == 0:
         return tets, 0
     tets = np.ascontiguousarray(tets)
-    neighbour, _, _ = match_faces(tets)
-    alive = _repair(tets, neighbour, bad, core.shape[0])
+    # Work on the band and one ring of tets around it: the stars of all band vertices.
+    band = ~core[tets].all(axis=1)
+    band_vertex = np.zeros(core.shape[0], dtype=bool)
+    band_vertex[tets[band].ravel()] = True
+    local = band_vertex[tets].any(axis=1)
+    sub = np.ascontiguousarray(tets[local])
+    neighbour, _, _ = match_faces(sub)
+    sub_alive, ok = _repair(sub, neighbour, bad, core.shape[0], band_vertex)
+    if ok:
+        alive = np.ones(tets.shape[0], dtype=bool)
+        alive[np.nonzero(local)[0][~sub_alive]] = False
+    else:  # the repair spread beyond the band: redo it on the whole mesh
+        neighbour, _, _ = match_faces(tets)
+        alive, _ = _repair(tets, neighbour, bad, core.shape[0], np.ones(core.shape[0], dtype=bool))
     core[tets[~alive].ravel()] = False
     _, _, faces = band_boundary(tets[alive], core)
     if nonmanifold_vertices(faces, core.shape[0]).any():
