@@ -21,7 +21,7 @@ from .lattice import freudenthal_tets, number_corners
 from .octant import MAX_LEVEL
 from .octree import octant_lattice_anchors, refine_to_level, touched_cells, uniform_leaves
 from .quality import tet_quality
-from .repair import band_boundary, remove_pinches
+from .repair import remove_pinches
 from .stuffing import CutEdges, _collect_cut_edges, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
@@ -190,10 +190,10 @@ def mesh(
 
     core = np.zeros(points.shape[0], dtype=bool)
     core[: coords.shape[0]] = inside & (targets < 0)
-    out_tets, report.repaired_tets = remove_pinches(out_tets, core)
+    out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
     stages.done("repair")
 
-    _measure(points, out_tets, core, surface, report)
+    _measure(points, out_tets, core, faces_out, report)
     points, out_tets = _compact(points, out_tets)
     stages.done("quality")
     lost = _losses(report)
@@ -285,10 +285,11 @@ def _compact(points, tets):
     return np.ascontiguousarray(points[used]), new_id[tets].astype(np.int32)
 
 
-def _measure(points, tets, core, surface: Surface, report: MeshReport) -> None:
-    """Quality, volume and boundary topology.  Core tets (all four vertices core) are untouched
-    lattice tets, so one measured core tet stands for all of them; the band is measured tet by tet."""
-    band, _, faces = band_boundary(tets, core)
+def _measure(points, tets, core, faces, report: MeshReport) -> None:
+    """Quality, volume and boundary topology (faces: the boundary).  Core tets (all four vertices
+    core) are untouched lattice tets, so one measured core tet stands for all of them; the band is
+    measured tet by tet."""
+    band = ~core[tets].all(axis=1)
     band_q = tet_quality(points, tets[band])
     n_core = int(tets.shape[0] - band.sum())
     report.n_tets = int(tets.shape[0])

@@ -177,8 +177,9 @@ def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.nd
     return band, neighbour, np.ascontiguousarray(faces)
 
 
-def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int]:
-    """Tets (M', 4) whose boundary is a closed 2-manifold, and the number of tets removed.
+def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
+    """Tets (M', 4) whose boundary is a closed 2-manifold, the number of tets removed, and
+    the boundary faces (F, 3) of the result.
 
     The band check finds the bad vertices cheaply; only if there are any is the full face
     adjacency built for the local worklist repair.  core: see band_boundary; vertices of
@@ -187,7 +188,7 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int]
     _, _, faces = band_boundary(tets, core)
     bad = np.nonzero(nonmanifold_vertices(faces, core.shape[0]))[0]
     if bad.size == 0:
-        return tets, 0
+        return tets, 0, faces
     tets = np.ascontiguousarray(tets)
     # Work on the band and one ring of tets around it: the stars of all band vertices.
     band = ~core[tets].all(axis=1)
@@ -204,7 +205,8 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int]
         neighbour, _, _ = match_faces(tets)
         alive, _ = _repair(tets, neighbour, bad, core.shape[0], np.ones(core.shape[0], dtype=bool))
     core[tets[~alive].ravel()] = False
-    _, _, faces = band_boundary(tets[alive], core)
+    tets = tets[alive]
+    _, _, faces = band_boundary(tets, core)
     if nonmanifold_vertices(faces, core.shape[0]).any():
         raise AssertionError("pinch repair left a non-manifold boundary vertex")
-    return tets[alive], int((~alive).sum())
+    return tets, int((~alive).sum()), faces

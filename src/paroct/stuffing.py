@@ -389,7 +389,11 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     n = _stencils(*args, np.empty((0, 4), dtype=np.int64), True)
     out = np.empty((n, 4), dtype=np.int64)
     _stencils(*args, out, False)
-    flat = _orient(points, out)
+    touched = signs[out[:, :4].clip(max=n_lattice - 1)].min(axis=1) <= 0
+    touched |= (out >= n_lattice).any(axis=1)
+    sub = np.ascontiguousarray(out[touched])
+    flat = _orient(points, sub)  # untouched lattice tets are positive by construction
+    out[touched] = sub
     if flat:
         raise AssertionError(f"stuffing produced {flat} flat tets")
     return points, out
