@@ -92,3 +92,27 @@ def tet_dihedral_angles(p: np.ndarray) -> list[float]:
             w = w - e * np.dot(w, e)
             out.append(np.degrees(np.arccos(np.clip(np.dot(u, w) / np.linalg.norm(u) / np.linalg.norm(w), -1, 1))))
     return out
+
+
+def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """Distance from p to the closed triangle abc by enumerating the closest-point candidates.
+
+    The closest point is a corner, the foot of p on an edge line (if within the edge), or the
+    foot on the plane (if its least-squares barycentrics are in the triangle); every candidate
+    is a point of the triangle, so the smallest candidate distance is the distance, even for
+    degenerate triangles.
+    """
+    p, a, b, c = (np.asarray(x, dtype=np.float64) for x in (p, a, b, c))
+    candidates = [a, b, c]
+    for s, e in ((a, b), (b, c), (c, a)):
+        d = e - s
+        dd = float(np.dot(d, d))
+        if dd > 0:
+            t = float(np.dot(p - s, d)) / dd
+            if 0.0 <= t <= 1.0:
+                candidates.append(s + t * d)
+    m = np.column_stack([b - a, c - a])
+    (u, v), *_ = np.linalg.lstsq(m, p - a, rcond=None)
+    if u >= 0 and v >= 0 and u + v <= 1:
+        candidates.append(a + u * (b - a) + v * (c - a))
+    return min(float(np.linalg.norm(p - q)) for q in candidates)

@@ -3,7 +3,7 @@
 Todd (1985) maps the Freudenthal/Kuhn triangulation of the integer grid by
 ``A = I - (n + 1 + sqrt(n + 1))^-1 e e^T``; for n = 3 that is ``A = I - e e^T / 6``
 (formula (1) of the seed paper; its printed matrix has the sign of the
-off-diagonal entries wrong).  Every image tet is congruent, 3r/R = 3 sqrt(2/5),
+off-diagonal entries wrong).  Every image tet is congruent, 3r/R = 3/sqrt(10),
 dihedral angles 60 and 90 degrees.  One more rotation ``R`` turns the mapped grid
 into the body-centred-cubic (BCC) lattice of Labelle & Shewchuk (2007): the
 axis-aligned cube grid of edge ``h`` plus the cube centres.  Then

@@ -20,8 +20,11 @@ _FORMAT_OVERRIDES = {
 _SURFACE_ONLY = {".stl", ".obj", ".off", ".ply", ".wrl", ".svg"}
 
 
-def _format_for(path: Path) -> tuple[str, dict]:
+def output_format(path: str | os.PathLike) -> tuple[str, dict]:
+    """The meshio format name and writer options for an output path; ParoctError if it cannot hold tets."""
     import meshio
+
+    path = Path(path)
 
     ext = path.suffix.lower()
     if ext in _FORMAT_OVERRIDES:
@@ -43,7 +46,7 @@ def write_mesh(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, ce
     import meshio
 
     path = Path(path)
-    fmt, options = _format_for(path)
+    fmt, options = output_format(path)
     mesh = meshio.Mesh(
         np.asarray(points, dtype=np.float64),
         [("tetra", np.asarray(tets, dtype=np.int64))],

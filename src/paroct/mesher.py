@@ -150,6 +150,8 @@ def mesh(
     report = MeshReport(size=h, levels=0, solid_volume=surface.volume,
                         input_genus=surface.genus, input_components=surface.components)
     report.stage_seconds["load"] = time.perf_counter() - t0
+    if progress:
+        progress("load")
     stages = _Stages(report, progress)
 
     box_tets = estimate_box_tets(surface, h)

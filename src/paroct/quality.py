@@ -1,6 +1,6 @@
 """Per-tet quality: signed volume, normalized radius ratio 3r/R, dihedral angles.
 
-3r/R is 1 for the regular tet and 3 sqrt(2/5) = 0.948683 for Todd's fat tet.  The
+3r/R is 1 for the regular tet and 3/sqrt(10) = 0.948683 for Todd's fat tet.  The
 circumradius uses R = sqrt((aA + bB + cC)(aA + bB - cC)(aA - bB + cC)(-aA + bB + cC)) / (24 V)
 with (a, A), (b, B), (c, C) the lengths of opposite edge pairs; the inradius r = 3V / area.
 """

@@ -9,6 +9,7 @@ triangles, which are closed and consistently oriented (outward normals, positive
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
@@ -72,7 +73,9 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
     try:
-        raw = meshio.read(path)
+        with warnings.catch_warnings():  # meshio's ASCII STL reader trips numpy overflow warnings
+            warnings.simplefilter("ignore", RuntimeWarning)
+            raw = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types, even SystemExit, for malformed files
         text = str(exc).strip()
         msg = text.splitlines()[0] if text and not isinstance(exc, SystemExit) else "malformed file"

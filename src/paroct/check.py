@@ -1,0 +1,425 @@
+"""Check a tet mesh: validity, quality, boundary topology, and fidelity to a surface.
+
+``check_mesh`` measures what any consumer of a tet mesh relies on: no inverted tets, every
+interior face shared by exactly two tets from opposite sides, and a boundary that is a
+closed 2-manifold.  Given the solid's surface it also compares volumes and measures the
+two-sided Hausdorff distance between the mesh boundary and the surface, sampled at
+triangle vertices, centroids and seeded random points, each measured exactly to the
+nearest triangle of the other side (uniform-grid search, numba).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .errors import ParoctError
+from .quality import tet_quality
+from .surface import Surface
+from .topology import boundary_faces, match_faces, surface_topology
+
+#: Below this sin^2 of the angle at a triangle's first vertex, the triangle is treated as its
+#: three edges: then the error of the plane distance (eps / sin) and of the edge distance
+#: (sin x edge length) are both about sqrt(eps) relative.
+_SLIVER_SIN2 = 1e-16
+#: Largest number of grid cells along one axis of the triangle search grid.
+_MAX_CELLS_PER_AXIS = 256
+
+
+@nb.njit(cache=True, inline="always")
+def _segment_sq(px, py, pz, ax, ay, az, bx, by, bz):
+    """Squared distance from p to the segment ab (a point if a == b)."""
+    ux, uy, uz = bx - ax, by - ay, bz - az
+    wx, wy, wz = px - ax, py - ay, pz - az
+    uu = ux * ux + uy * uy + uz * uz
+    t = 0.0
+    if uu > 0.0:
+        t = min(1.0, max(0.0, (wx * ux + wy * uy + wz * uz) / uu))
+    dx, dy, dz = wx - t * ux, wy - t * uy, wz - t * uz
+    return dx * dx + dy * dy + dz * dz
+
+
+@nb.njit(cache=True)
+def _point_triangle_sq(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Squared distance from p to the closed triangle abc; degenerate triangles are their edges."""
+    ux, uy, uz = bx - ax, by - ay, bz - az
+    vx, vy, vz = cx - ax, cy - ay, cz - az
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    nn = nx * nx + ny * ny + nz * nz
+    if nn > _SLIVER_SIN2 * (ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz):
+        # Signs of the sub-triangle areas p'bc, p'ca, p'ab of the projection p' of p.
+        qax, qay, qaz = ax - px, ay - py, az - pz
+        qbx, qby, qbz = bx - px, by - py, bz - pz
+        qcx, qcy, qcz = cx - px, cy - py, cz - pz
+        wa = nx * (qby * qcz - qbz * qcy) + ny * (qbz * qcx - qbx * qcz) + nz * (qbx * qcy - qby * qcx)
+        wb = nx * (qcy * qaz - qcz * qay) + ny * (qcz * qax - qcx * qaz) + nz * (qcx * qay - qcy * qax)
+        wc = nx * (qay * qbz - qaz * qby) + ny * (qaz * qbx - qax * qbz) + nz * (qax * qby - qay * qbx)
+        if wa >= 0.0 and wb >= 0.0 and wc >= 0.0:
+            s = qax * nx + qay * ny + qaz * nz
+            return s * s / nn
+    d = _segment_sq(px, py, pz, ax, ay, az, bx, by, bz)
+    d = min(d, _segment_sq(px, py, pz, bx, by, bz, cx, cy, cz))
+    return min(d, _segment_sq(px, py, pz, cx, cy, cz, ax, ay, az))
+
+
+@nb.njit(cache=True, parallel=True)
+def _pair_distances(points, triangles, out):
+    for i in nb.prange(points.shape[0]):
+        t = triangles[i]
+        out[i] = math.sqrt(_point_triangle_sq(points[i, 0], points[i, 1], points[i, 2],
+                                              t[0, 0], t[0, 1], t[0, 2], t[1, 0], t[1, 1], t[1, 2],
+                                              t[2, 0], t[2, 1], t[2, 2]))
+
+
+def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Exact distance (Q,) float64 from each point (Q, 3) to its triangle (Q, 3, 3) (corners in rows).
+
+    Degenerate triangles (repeated or collinear corners) are measured as their edges.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    triangles = np.ascontiguousarray(triangles, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or triangles.shape != (points.shape[0], 3, 3):
+        raise ValueError(f"points.shape = {points.shape}, triangles.shape = {triangles.shape}; expected (Q, 3), (Q, 3, 3)")
+    out = np.empty(points.shape[0])
+    if points.shape[0]:
+        _pair_distances(points, triangles, out)
+    return out
+
+
+@nb.njit(cache=True)
+def _bin_triangles(vertices, faces, origin, cell, dims):
+    """CSR lists of the triangles whose bounding box meets each grid cell: (start (C + 1,), items)."""
+    nf = faces.shape[0]
+    lo = np.empty((nf, 3), dtype=np.int64)
+    hi = np.empty((nf, 3), dtype=np.int64)
+    n_cells = dims[0] * dims[1] * dims[2]
+    start = np.zeros(n_cells + 1, dtype=np.int64)
+    for f in range(nf):
+        for k in range(3):
+            mn = min(vertices[faces[f, 0], k], vertices[faces[f, 1], k], vertices[faces[f, 2], k])
+            mx = max(vertices[faces[f, 0], k], vertices[faces[f, 1], k], vertices[faces[f, 2], k])
+            lo[f, k] = min(dims[k] - 1, max(0, np.int64(math.floor((mn - origin[k]) / cell))))
+            hi[f, k] = min(dims[k] - 1, max(0, np.int64(math.floor((mx - origin[k]) / cell))))
+        for i in range(lo[f, 0], hi[f, 0] + 1):
+            for j in range(lo[f, 1], hi[f, 1] + 1):
+                for k in range(lo[f, 2], hi[f, 2] + 1):
+                    start[(i * dims[1] + j) * dims[2] + k + 1] += 1
+    for c in range(n_cells):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(start[n_cells], dtype=np.int64)
+    for f in range(nf):
+        for i in range(lo[f, 0], hi[f, 0] + 1):
+            for j in range(lo[f, 1], hi[f, 1] + 1):
+                for k in range(lo[f, 2], hi[f, 2] + 1):
+                    c = (i * dims[1] + j) * dims[2] + k
+                    items[fill[c]] = f
+                    fill[c] += 1
+    return start, items
+
+
+@nb.njit(cache=True, inline="always")
+def _scan_cell(px, py, pz, c, start, items, vertices, faces, best):
+    for s in range(start[c], start[c + 1]):
+        f = items[s]
+        a = faces[f, 0]
+        b = faces[f, 1]
+        e = faces[f, 2]
+        d = _point_triangle_sq(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                               vertices[b, 0], vertices[b, 1], vertices[b, 2],
+                               vertices[e, 0], vertices[e, 1], vertices[e, 2])
+        if d < best:
+            best = d
+    return best
+
+
+@nb.njit(cache=True, parallel=True)
+def _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out):
+    """Distance from each query (inside the grid box) to the nearest triangle, by growing cube shells.
+
+    After the shell at Chebyshev radius r around the query's cell, every triangle not yet
+    seen lies outside the box of cells within r, so at least as far as that box's nearest
+    side that is not the grid's own side; stop once the best distance is within it.
+    """
+    for q in nb.prange(queries.shape[0]):
+        px, py, pz = queries[q, 0], queries[q, 1], queries[q, 2]
+        ci = min(dims[0] - 1, max(0, np.int64(math.floor((px - origin[0]) / cell))))
+        cj = min(dims[1] - 1, max(0, np.int64(math.floor((py - origin[1]) / cell))))
+        ck = min(dims[2] - 1, max(0, np.int64(math.floor((pz - origin[2]) / cell))))
+        best = np.inf
+        r = 0
+        while True:
+            i0, i1 = max(ci - r, 0), min(ci + r, dims[0] - 1)
+            j0, j1 = max(cj - r, 0), min(cj + r, dims[1] - 1)
+            k0, k1 = max(ck - r, 0), min(ck + r, dims[2] - 1)
+            for i in range(i0, i1 + 1):
+                for j in range(j0, j1 + 1):
+                    base = (i * dims[1] + j) * dims[2]
+                    if abs(i - ci) == r or abs(j - cj) == r:
+                        for k in range(k0, k1 + 1):
+                            best = _scan_cell(px, py, pz, base + k, start, items, vertices, faces, best)
+                    else:
+                        if ck - r >= 0:
+                            best = _scan_cell(px, py, pz, base + ck - r, start, items, vertices, faces, best)
+                        if r > 0 and ck + r < dims[2]:
+                            best = _scan_cell(px, py, pz, base + ck + r, start, items, vertices, faces, best)
+            # Distance from the query to the unexplored part of the grid.
+            gap = np.inf
+            if i0 > 0:
+                gap = min(gap, px - (origin[0] + i0 * cell))
+            if i1 < dims[0] - 1:
+                gap = min(gap, origin[0] + (i1 + 1) * cell - px)
+            if j0 > 0:
+                gap = min(gap, py - (origin[1] + j0 * cell))
+            if j1 < dims[1] - 1:
+                gap = min(gap, origin[1] + (j1 + 1) * cell - py)
+            if k0 > 0:
+                gap = min(gap, pz - (origin[2] + k0 * cell))
+            if k1 < dims[2] - 1:
+                gap = min(gap, origin[2] + (k1 + 1) * cell - pz)
+            if gap == np.inf or best <= gap * gap:
+                break
+            r += 1
+        out[q] = math.sqrt(best)
+
+
+def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Exact distance (Q,) float64 from each query point (Q, 3) to the nearest of the triangles.
+
+    vertices: (V, 3) float64; faces: (F, 3) integer, F >= 1.  A uniform grid over the
+    triangles and the queries (about one triangle per cell, at most 256 cells per axis)
+    limits the triangles measured per query.
+    """
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    if faces.shape[0] == 0:
+        raise ValueError("no triangles to measure the distance to")
+    out = np.empty(queries.shape[0])
+    if queries.shape[0] == 0:
+        return out
+    used = vertices[np.unique(faces)]
+    lo = np.minimum(used.min(axis=0), queries.min(axis=0))
+    hi = np.maximum(used.max(axis=0), queries.max(axis=0))
+    extent = hi - lo
+    longest = float(extent.max())
+    if longest == 0.0:
+        longest = 1.0
+    cell = max(float(np.prod(np.maximum(extent, 1e-9 * longest)) / faces.shape[0]) ** (1 / 3),
+               longest / _MAX_CELLS_PER_AXIS)
+    # Pad the box by a little so that rounding in the cell index never leaves a point outside.
+    origin = lo - 0.5 * cell
+    dims = np.maximum(1, np.ceil((extent + cell) / cell).astype(np.int64))
+    start, items = _bin_triangles(vertices, faces, origin, cell, dims)
+    _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out)
+    return out
+
+
+def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int = 3, seed: int = 0) -> np.ndarray:
+    """Points (S, 3) on triangles: every used vertex, every centroid, and ``per_triangle``
+    uniformly random points per triangle (numpy Generator with ``seed``, so repeatable)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    corners = vertices[faces]  # (F, 3, 3)
+    parts = [vertices[np.unique(faces)], corners.mean(axis=1)]
+    if per_triangle > 0 and faces.shape[0]:
+        rng = np.random.default_rng(seed)
+        r1 = np.sqrt(rng.random((faces.shape[0], per_triangle)))
+        r2 = rng.random((faces.shape[0], per_triangle))
+        bary = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], axis=-1)  # (F, k, 3)
+        parts.append(np.einsum("fkc,fcd->fkd", bary, corners).reshape(-1, 3))
+    return np.concatenate(parts)
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """Findings of check_mesh.  Lengths and volumes in model units, angles in degrees.
+
+    Quality fields are over all tets (an inverted tet counts as dihedral angles 0 and 180,
+    3r/R 0); they are NaN for an empty mesh.  ``boundary_*`` describe the triangles on
+    exactly one tet.  The surface fields are None unless a surface was given; the
+    Hausdorff distances are relative to the surface's bounding-box diagonal:
+    ``hausdorff_to_surface`` is the largest distance from a mesh-boundary sample to the
+    surface, ``hausdorff_to_mesh`` from a surface sample to the mesh boundary, and
+    ``hausdorff_at`` the sample point that attains the larger one.
+    """
+
+    n_tets: int
+    n_vertices: int
+    n_unreferenced: int
+    n_inverted: int
+    min_dihedral: float
+    max_dihedral: float
+    min_radius_ratio: float
+    volume: float
+    overloaded_faces: int
+    same_side_faces: int
+    boundary_faces: int
+    boundary_bad_edges: int
+    boundary_bad_vertices: int
+    boundary_components: int
+    boundary_genus: int
+    solid_volume: float | None = None
+    surface_components: int | None = None
+    surface_genus: int | None = None
+    hausdorff_to_surface: float | None = None
+    hausdorff_to_mesh: float | None = None
+    hausdorff_at: tuple[float, float, float] | None = None
+
+    @property
+    def boundary_manifold(self) -> bool:
+        """Every boundary edge in two boundary triangles of opposite orientation, every vertex one fan."""
+        return self.boundary_bad_edges == 0 and self.boundary_bad_vertices == 0
+
+    @property
+    def volume_error(self) -> float | None:
+        """(mesh volume - solid volume) / solid volume, or None without a surface."""
+        if self.solid_volume is None:
+            return None
+        return (self.volume - self.solid_volume) / self.solid_volume
+
+    @property
+    def hausdorff(self) -> float | None:
+        """Two-sided Hausdorff distance / surface diagonal, or None without a surface."""
+        if self.hausdorff_to_surface is None or self.hausdorff_to_mesh is None:
+            return None
+        return max(self.hausdorff_to_surface, self.hausdorff_to_mesh)
+
+    @property
+    def ok(self) -> bool:
+        """A usable mesh: tets, none inverted, conforming faces, closed manifold boundary."""
+        return not self.problems()
+
+    def problems(self) -> list[str]:
+        """One line per failed requirement, with the numbers; empty if the mesh is ok."""
+        out = []
+        if self.n_tets == 0:
+            out.append("the mesh has no tets")
+        if self.n_inverted:
+            out.append(f"{self.n_inverted} of {self.n_tets} tets are inverted or flat (signed volume <= 0)")
+        if self.overloaded_faces:
+            out.append(f"{self.overloaded_faces} faces are shared by more than two tets")
+        if self.same_side_faces:
+            out.append(f"{self.same_side_faces} faces have both their tets on the same side (inverted neighbour)")
+        if self.boundary_bad_edges:
+            out.append(f"boundary not closed and manifold: {self.boundary_bad_edges} of its edges are not in exactly "
+                       "two oppositely oriented boundary triangles")
+        if self.boundary_bad_vertices:
+            out.append(f"boundary not manifold: at {self.boundary_bad_vertices} vertices the boundary triangles "
+                       "do not form one closed fan")
+        return out
+
+    def format(self) -> str:
+        """The report as printable lines."""
+        lines = [
+            f"tets {self.n_tets}, vertices {self.n_vertices} ({self.n_unreferenced} unreferenced)",
+            f"inverted tets {self.n_inverted}",
+            f"dihedral angles {self.min_dihedral:.4g} .. {self.max_dihedral:.4g} deg, min 3r/R {self.min_radius_ratio:.4g}",
+            f"volume {self.volume:.6g}",
+            f"faces shared by more than two tets {self.overloaded_faces}, with both tets on one side {self.same_side_faces}",
+            f"boundary {self.boundary_faces} triangles, {self.boundary_components} components, genus {self.boundary_genus}, "
+            + ("closed manifold" if self.boundary_manifold else
+               f"NOT manifold ({self.boundary_bad_edges} bad edges, {self.boundary_bad_vertices} bad vertices)"),
+        ]
+        if self.solid_volume is not None:
+            lines.append(f"solid volume {self.solid_volume:.6g}, mesh volume error {100 * self.volume_error:+.3f}%")
+            lines.append(f"surface {self.surface_components} components, genus {self.surface_genus}")
+            x, y, z = self.hausdorff_at
+            lines.append(f"Hausdorff distance {self.hausdorff:.4g} x diagonal (mesh->surface {self.hausdorff_to_surface:.4g}, "
+                         f"surface->mesh {self.hausdorff_to_mesh:.4g}), largest at ({x:.6g}, {y:.6g}, {z:.6g})")
+        problems = self.problems()
+        lines.extend(f"FAIL: {p}" for p in problems)
+        lines.append("ok" if not problems else f"{len(problems)} problems")
+        return "\n".join(lines)
+
+
+def _validate(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    points = np.asarray(points)
+    tets = np.asarray(tets)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ParoctError(f"points.shape = {points.shape}, expected (N, 3)")
+    if tets.ndim != 2 or tets.shape[1] != 4:
+        raise ParoctError(f"tets.shape = {tets.shape}, expected (M, 4)")
+    if tets.size and not np.issubdtype(tets.dtype, np.integer):
+        raise ParoctError(f"tets.dtype = {tets.dtype}, expected integers")
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    if tets.size and (tets.min() < 0 or tets.max() >= points.shape[0]):
+        raise ParoctError(f"tet vertex indices span {tets.min()}..{tets.max()} but there are {points.shape[0]} points")
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    bad = ~np.isfinite(points[np.unique(tets)]).all(axis=1) if tets.size else np.zeros(0, dtype=bool)
+    if bad.any():
+        raise ParoctError(f"{int(bad.sum())} tet vertices have a NaN or infinite coordinate")
+    return points, tets
+
+
+def check_mesh(
+    points: np.ndarray,
+    tets: np.ndarray,
+    surface: Surface | None = None,
+    *,
+    samples_per_triangle: int = 3,
+    seed: int = 0,
+) -> CheckReport:
+    """Validity, quality and boundary topology of a tet mesh, and its fidelity to ``surface``.
+
+    points: (N, 3) float64 model units; tets: (M, 4) integer vertex indices, positively
+    oriented.  surface: the solid the mesh should fill; then the report holds the solid
+    volume and the two-sided Hausdorff distance between the mesh boundary and the surface
+    (see sample_triangles for the samples, ``samples_per_triangle`` random ones per
+    triangle drawn with ``seed``).  Raises ParoctError for malformed arrays (wrong shapes,
+    indices out of range, NaN coordinates on tet vertices).
+    """
+    points, tets = _validate(points, tets)
+    n = points.shape[0]
+    m = tets.shape[0]
+    q = tet_quality(points, tets)
+    neighbour, overloaded, same_side = match_faces(tets)
+    faces = boundary_faces(tets, neighbour)
+    topo = surface_topology(faces, n)
+    referenced = np.unique(tets).shape[0] if m else 0
+    empty = m == 0
+    fields = dict(
+        n_tets=int(m),
+        n_vertices=int(n),
+        n_unreferenced=int(n - referenced),
+        n_inverted=int(np.count_nonzero(q.volume <= 0.0)),
+        min_dihedral=float("nan") if empty else float(q.min_dihedral.min()),
+        max_dihedral=float("nan") if empty else float(q.max_dihedral.max()),
+        min_radius_ratio=float("nan") if empty else float(q.radius_ratio.min()),
+        volume=float(q.volume.sum()),
+        overloaded_faces=int(overloaded),
+        same_side_faces=int(same_side),
+        boundary_faces=int(faces.shape[0]),
+        boundary_bad_edges=int(topo.bad_edges),
+        boundary_bad_vertices=int(topo.bad_vertices),
+        boundary_components=int(topo.components),
+        boundary_genus=int(topo.genus),
+    )
+    if surface is not None:
+        fields.update(_surface_fields(points, faces, surface, samples_per_triangle, seed))
+    return CheckReport(**fields)
+
+
+def _surface_fields(points, faces, surface: Surface, per_triangle: int, seed: int) -> dict:
+    """Solid volume and the two directed Hausdorff distances (relative to the diagonal)."""
+    out = dict(solid_volume=float(surface.volume), surface_components=int(surface.components),
+               surface_genus=int(surface.genus))
+    diagonal = surface.diagonal
+    surface_faces = np.asarray(surface.faces, dtype=np.int64)
+    if faces.shape[0] == 0:  # no boundary to compare: the whole surface is missed
+        far = np.inf
+        out.update(hausdorff_to_surface=far, hausdorff_to_mesh=far,
+                   hausdorff_at=tuple(float(c) for c in surface.vertices[0]))
+        return out
+    on_mesh = sample_triangles(points, faces, per_triangle, seed)
+    on_surface = sample_triangles(surface.vertices, surface_faces, per_triangle, seed)
+    to_surface = distances_to_triangles(on_mesh, surface.vertices, surface_faces)
+    to_mesh = distances_to_triangles(on_surface, points, faces)
+    i, j = int(np.argmax(to_surface)), int(np.argmax(to_mesh))
+    at = on_mesh[i] if to_surface[i] >= to_mesh[j] else on_surface[j]
+    out.update(hausdorff_to_surface=float(to_surface[i] / diagonal), hausdorff_to_mesh=float(to_mesh[j] / diagonal),
+               hausdorff_at=tuple(float(c) for c in at))
+    return out

@@ -1,0 +1,174 @@
+"""The ``paroct`` command: mesh a closed surface, check a tet mesh, print the paper's table.
+
+Exit codes: 0 success; 1 ``check`` found problems; 2 a user error (bad input or options),
+printed as one line ``paroct: error: ...``; 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Sequence
+
+from . import __version__
+from .errors import ParoctError
+
+EXIT_OK = 0
+EXIT_CHECK_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+class _UsageError(Exception):
+    """An argparse complaint, turned into the one-line error."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # argparse would print the usage and exit; we print one line
+        raise _UsageError(message)
+
+
+def _err(message: str) -> None:
+    print(f"paroct: {message}", file=sys.stderr, flush=True)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    _err(f"warning: {_one_line(message)}")
+
+
+def _one_line(text: object) -> str:
+    return "; ".join(part.strip() for part in str(text).splitlines() if part.strip()) or "unknown error"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``paroct`` command (subcommands mesh, check, paper-table)."""
+    parser = _Parser(prog="paroct", description="Tetrahedral meshes of closed solids from Todd's fat (BCC) triangulation.")
+    parser.add_argument("--version", action="version", version=f"paroct {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    m = sub.add_parser("mesh", help="fill a closed surface with tets", description="Fill the solid bounded by SURFACE "
+                       "(STL, OBJ, OFF, PLY) with fat-lattice tets and write them to OUT.")
+    m.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off or .ply")
+    m.add_argument("-o", "--output", metavar="OUT",
+                   help="output mesh; format by extension (.vtu, .msh, .mesh, .inp, .vtk, ...); "
+                        "default: SURFACE's name with .vtu in the current folder")
+    size = m.add_mutually_exclusive_group()
+    size.add_argument("--size", type=float, metavar="H", help="long edge of the lattice tets, model units")
+    size.add_argument("--divisions", type=float, metavar="N", help="size = bounding-box diagonal / N (default 40)")
+    m.add_argument("--max-memory", type=float, metavar="GIB",
+                   help="refuse sizes needing more than this many GiB (default: the available memory)")
+    talk = m.add_mutually_exclusive_group()
+    talk.add_argument("-v", "--verbose", action="store_true", help="report each stage as it ends, and stage times")
+    talk.add_argument("-q", "--quiet", action="store_true", help="no summary (warnings and errors still go to stderr)")
+    m.set_defaults(run=_run_mesh)
+
+    c = sub.add_parser("check", help="check a tet mesh", description="Check a tet mesh: inverted tets, conformity, "
+                       "boundary topology, quality; with --against, volume and Hausdorff distance to the surface. "
+                       "Exit code 1 if the mesh has problems.")
+    c.add_argument("mesh", metavar="MESH", help="tet mesh file (.vtu, .msh, .mesh, .inp, .vtk, ...)")
+    c.add_argument("--against", metavar="SURFACE", help="the closed surface the mesh should fill")
+    c.set_defaults(run=_run_check)
+
+    p = sub.add_parser("paper-table", help="recompute the seed paper's Table 1, with errata",
+                       description="Recompute the seed paper's Table 1 and list its errata.")
+    p.set_defaults(run=_run_paper_table)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``paroct`` command with ``argv`` (default: sys.argv[1:]); returns the exit code."""
+    parser = build_parser()
+    try:
+        with warnings.catch_warnings():
+            # meshio's readers trip numpy overflow/division warnings on valid files (e.g. ASCII STL);
+            # any other Python warning is shown as one line.
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"meshio(\.|$)")
+            warnings.showwarning = _show_warning
+            args = parser.parse_args(argv)
+            if args.command is None:
+                raise _UsageError("choose a command: mesh, check or paper-table (see paroct --help)")
+            return args.run(args)
+    except (_UsageError, ParoctError) as exc:
+        _err(f"error: {_one_line(exc)}")
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return EXIT_INTERRUPTED
+    except SystemExit as exc:  # --help and --version
+        return exc.code if isinstance(exc.code, int) else (EXIT_OK if exc.code is None else EXIT_USAGE)
+
+
+def _run_mesh(args: argparse.Namespace) -> int:
+    from .io import output_format, write_mesh
+    from .mesher import mesh
+
+    source = Path(args.surface)
+    out = Path(args.output) if args.output else Path.cwd() / (source.stem + ".vtu")
+    # Refuse a bad output before spending the meshing time.
+    output_format(out)
+    if not out.parent.is_dir():
+        raise ParoctError(f"{out}: folder {out.parent} does not exist")
+    max_memory = None
+    if args.max_memory is not None:
+        if not (math.isfinite(args.max_memory) and args.max_memory > 0):
+            raise ParoctError(f"--max-memory {args.max_memory}: must be a positive number of GiB")
+        max_memory = int(args.max_memory * 2**30)
+
+    def progress(stage: str) -> None:
+        _err(f"{stage} done")
+
+    t0 = time.perf_counter()
+    result = mesh(source, args.size, divisions=args.divisions, max_memory=max_memory,
+                  progress=progress if args.verbose else None)
+    t1 = time.perf_counter()
+    write_mesh(out, result.mesh.points, result.mesh.tets)
+    t2 = time.perf_counter()
+    report = result.report
+    for warning in report.warnings:
+        _err(f"warning: {_one_line(warning)}")
+    if not args.quiet:
+        print(format_mesh_summary(report, out, mesh_seconds=t1 - t0, write_seconds=t2 - t1, verbose=args.verbose))
+    return EXIT_OK
+
+
+def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seconds: float, verbose: bool = False) -> str:
+    """Printable summary of a mesher.MeshReport: counts, quality, volume, topology, times (seconds)."""
+    err = report.volume_error
+    err_text = "n/a" if math.isnan(err) else f"{100 * err:+.2f}%"
+    lines = [
+        f"wrote {out}: {report.n_tets} tets, {report.n_vertices} vertices (size {report.size:.4g}, {report.levels} levels)",
+        f"dihedral angles {report.min_dihedral:.2f} .. {report.max_dihedral:.2f} deg, min 3r/R {report.min_radius_ratio:.4f}",
+        f"volume {report.mesh_volume:.6g}, solid {report.solid_volume:.6g} ({err_text})",
+        f"boundary {report.boundary_components} components, genus {report.boundary_genus}"
+        f"{'' if report.boundary_manifold else ', NOT manifold'}; "
+        f"input {report.input_components} components, genus {report.input_genus}",
+    ]
+    if verbose:
+        lines.append(f"unresolved cuts {report.unresolved_cuts}, repaired tets {report.repaired_tets}")
+        lines += [f"  {stage:<10} {seconds:8.3f} s" for stage, seconds in report.stage_seconds.items()]
+        lines.append(f"  {'write':<10} {write_seconds:8.3f} s")
+    lines.append(f"time {mesh_seconds + write_seconds:.3f} s")
+    return "\n".join(lines)
+
+
+def _run_check(args: argparse.Namespace) -> int:
+    from .check import check_mesh
+    from .io import read_mesh
+    from .surface import load_surface
+
+    points, tets = read_mesh(args.mesh)
+    surface = load_surface(args.against) if args.against else None
+    report = check_mesh(points, tets, surface)
+    print(report.format())
+    return EXIT_OK if report.ok else EXIT_CHECK_FAILED
+
+
+def _run_paper_table(args: argparse.Namespace) -> int:
+    from .paper import format_paper_table
+
+    print(format_paper_table())
+    return EXIT_OK

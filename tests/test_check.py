@@ -1,0 +1,248 @@
+"""check_mesh on meshes with known defects, and the exact distance kernels against naive twins."""
+
+import math
+
+import manifold3d
+import numpy as np
+import pytest
+
+from paroct.check import check_mesh, distances_to_triangles, point_triangle_distance, sample_triangles
+from paroct.errors import ParoctError
+from paroct.lattice import leaf_tets
+from paroct.surface import load_surface
+from paroct.topology import boundary_faces, match_faces
+
+from . import naive
+
+KUHN_RATIO = math.sqrt(6) - math.sqrt(3)  # 3r/R of a Kuhn tet of a cube
+
+
+def _block(n: int, h: float = 1.0):
+    """Kuhn tets of an n x n x n block of axis-aligned cubes of side h: [0, n h]^3."""
+    g = np.arange(n)
+    anchors = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    coords, tets = leaf_tets(anchors, np.ones(len(anchors), dtype=np.int64))
+    return coords * float(h), tets.astype(np.int64)
+
+
+def _box_surface(lo, hi):
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return load_surface(manifold3d.Manifold.cube(list(hi - lo)).translate(list(lo)))
+
+
+def test_valid_block_is_ok_with_the_kuhn_numbers():
+    points, tets = _block(3, 0.5)
+    rep = check_mesh(points, tets)
+    assert rep.ok and rep.problems() == []
+    assert rep.n_tets == 6 * 27 and rep.n_vertices == 64 and rep.n_unreferenced == 0
+    assert rep.n_inverted == 0 and rep.overloaded_faces == 0 and rep.same_side_faces == 0
+    assert rep.volume == pytest.approx(1.5**3, rel=1e-12)
+    assert rep.min_dihedral == pytest.approx(45.0, abs=1e-9) and rep.max_dihedral == pytest.approx(90.0, abs=1e-9)
+    assert rep.min_radius_ratio == pytest.approx(KUHN_RATIO, abs=1e-12)
+    assert rep.boundary_faces == 6 * 9 * 2  # two triangles per boundary square
+    assert rep.boundary_manifold and rep.boundary_components == 1 and rep.boundary_genus == 0
+    assert rep.solid_volume is None and rep.hausdorff is None
+    assert rep.format().splitlines()[-1] == "ok"
+
+
+def test_inverted_interior_tet_fails_with_same_side_faces():
+    points, tets = _block(3)
+    # A tet of the centre cube [1, 2]^3 has all four faces interior.
+    centre = next(t for t in range(len(tets)) if np.all(points[tets[t]] >= 1) and np.all(points[tets[t]] <= 2))
+    tets[centre, [0, 1]] = tets[centre, [1, 0]]
+    rep = check_mesh(points, tets)
+    assert not rep.ok
+    assert rep.n_inverted == 1
+    assert rep.same_side_faces == 4  # each of its faces now lies on the same side as its neighbour's
+    assert rep.boundary_manifold  # the outer boundary is untouched
+    problems = rep.problems()
+    assert len(problems) == 2 and all(any(ch.isdigit() for ch in p) for p in problems)
+    assert "1 of 162 tets are inverted" in problems[0]
+
+
+def test_two_tets_sharing_only_an_edge_are_not_manifold():
+    points = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    tets = np.array([[0, 2, 3, 1], [0, 4, 5, 1]])
+    assert np.all([np.linalg.det(points[t[1:]] - points[t[0]]) > 0 for t in tets])
+    rep = check_mesh(points, tets)
+    assert not rep.ok and rep.n_inverted == 0 and rep.overloaded_faces == 0
+    assert rep.boundary_bad_edges == 1  # edge 0-1 is in four boundary triangles
+    assert rep.boundary_bad_vertices == 2  # its ends see two separate fans
+    assert any("1 of its edges" in p for p in rep.problems())
+
+
+def test_two_tets_sharing_only_a_vertex_are_not_manifold():
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
+    tets = np.array([[0, 1, 2, 3], [0, 5, 4, 6]])
+    assert np.all([np.linalg.det(points[t[1:]] - points[t[0]]) > 0 for t in tets])
+    rep = check_mesh(points, tets)
+    assert not rep.ok
+    assert rep.boundary_bad_edges == 0 and rep.boundary_bad_vertices == 1
+    assert rep.boundary_components == 1
+
+
+def test_interior_cavity_is_a_closed_manifold_shell_and_passes():
+    points, tets = _block(3)
+    centre = next(t for t in range(len(tets)) if np.all(points[tets[t]] >= 1) and np.all(points[tets[t]] <= 2))
+    rep = check_mesh(points, np.delete(tets, centre, axis=0))
+    assert rep.ok
+    assert rep.boundary_components == 2 and rep.boundary_genus == 0
+    assert rep.boundary_faces == 6 * 9 * 2 + 4
+    assert rep.volume == pytest.approx(27 - 1 / 6, rel=1e-12)
+
+
+def test_duplicated_tet_is_overloaded():
+    points, tets = _block(2)
+    rep = check_mesh(points, np.vstack([tets, tets[:1]]))
+    assert not rep.ok
+    # The copy's interior faces meet a third tet; its boundary faces meet the original from the same side.
+    assert rep.overloaded_faces > 0 and rep.same_side_faces > 0
+
+
+def test_unreferenced_vertex_is_counted_but_ok():
+    points, tets = _block(2)
+    rep = check_mesh(np.vstack([points, [[9.0, 9.0, 9.0]]]), tets)
+    assert rep.ok and rep.n_unreferenced == 1 and rep.n_vertices == len(points) + 1
+
+
+def test_empty_mesh_is_not_ok():
+    rep = check_mesh(np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64))
+    assert not rep.ok and rep.problems() == ["the mesh has no tets"]
+
+
+@pytest.mark.parametrize(
+    "points,tets,match",
+    [
+        (np.zeros((4, 2)), np.array([[0, 1, 2, 3]]), "points.shape"),
+        (np.eye(4, 3), np.array([[0, 1, 2]]), "tets.shape"),
+        (np.eye(4, 3), np.array([[0, 1, 2, 4]]), "span 0..4"),
+        (np.eye(4, 3), np.array([[0, 1, 2, -1]]), "span -1..2"),
+        (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, np.nan]]), np.array([[0, 1, 2, 3]]), "NaN"),
+        (np.eye(4, 3), np.array([[0.0, 1, 2, 3]]), "integers"),
+    ],
+)
+def test_malformed_arrays_raise_one_line_errors(points, tets, match):
+    with pytest.raises(ParoctError, match=match) as info:
+        check_mesh(points, tets)
+    assert "\n" not in str(info.value)
+
+
+def test_hausdorff_zero_when_boundary_is_the_surface_and_shift_when_shifted():
+    points, tets = _block(2, 0.5)  # [0, 1]^3
+    same = check_mesh(points, tets, _box_surface([0, 0, 0], [1, 1, 1]))
+    assert same.ok
+    assert same.hausdorff < 1e-12 and abs(same.volume_error) < 1e-12
+    shift = 0.05
+    moved = _box_surface([shift, 0, 0], [1 + shift, 1, 1])
+    rep = check_mesh(points, tets, moved)
+    expected = shift / math.sqrt(3)  # the diagonal of the unit box
+    # The mesh's face x = 0 is shift away from the surface, and the surface's face x = 1 + shift from the mesh.
+    assert rep.hausdorff_to_surface == pytest.approx(expected, rel=1e-9)
+    assert rep.hausdorff_to_mesh == pytest.approx(expected, rel=1e-9)
+    assert rep.volume_error == pytest.approx(0.0, abs=1e-12)
+    taller = check_mesh(points, tets, _box_surface([0, 0, 0], [1, 1, 1.25]))
+    assert taller.volume_error == pytest.approx(1 / 1.25 - 1, rel=1e-12)
+    assert taller.solid_volume == pytest.approx(1.25, rel=1e-12)
+    assert taller.hausdorff == pytest.approx(0.25 / math.sqrt(2 + 1.25**2), rel=1e-9)
+
+
+def test_hausdorff_matches_brute_force_on_the_samples():
+    points, tets = _block(2, 0.5)
+    sphere = load_surface(manifold3d.Manifold.sphere(0.6, 16).translate([0.5, 0.5, 0.5]))
+    rep = check_mesh(points, tets, sphere, samples_per_triangle=2, seed=7)
+    faces = boundary_faces(tets, match_faces(tets)[0])
+    on_mesh = sample_triangles(points, faces, 2, 7)
+    on_sphere = sample_triangles(sphere.vertices, sphere.faces, 2, 7)
+    to_sphere = max(min(naive.point_triangle_distance(p, *sphere.vertices[f]) for f in sphere.faces) for p in on_mesh)
+    to_mesh = max(min(naive.point_triangle_distance(p, *points[f]) for f in faces) for p in on_sphere)
+    assert rep.hausdorff_to_surface == pytest.approx(to_sphere / sphere.diagonal, rel=1e-9)
+    assert rep.hausdorff_to_mesh == pytest.approx(to_mesh / sphere.diagonal, rel=1e-9)
+    assert rep.hausdorff > 0.01  # a sphere is not a cube
+
+
+def _degenerate_triangles(rng):
+    a, b = rng.normal(size=3), rng.normal(size=3)
+    return [
+        (a, a, a),  # a point
+        (a, a, b),  # a segment with a repeated corner
+        (a, b, a + 2 * (b - a)),  # collinear, c beyond b
+        (a, a + 0.5 * (b - a), b),  # collinear, middle corner between
+        (a, b, b),
+        (a, b, a + 3 * (b - a) + 1e-13 * rng.normal(size=3)),  # a sliver, almost collinear
+    ]
+
+
+def test_point_triangle_distance_matches_naive_on_random_triangles():
+    rng = np.random.default_rng(1)
+    q = 400
+    points = rng.normal(size=(q, 3)) * rng.choice([0.01, 1.0, 100.0], size=(q, 1))
+    tris = rng.normal(size=(q, 3, 3))
+    got = point_triangle_distance(points, tris)
+    want = np.array([naive.point_triangle_distance(points[i], *tris[i]) for i in range(q)])
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+def test_point_triangle_distance_on_degenerate_triangles_and_on_the_triangle():
+    rng = np.random.default_rng(2)
+    pts, tris = [], []
+    for _ in range(20):
+        for tri in _degenerate_triangles(rng):
+            for p in (rng.normal(size=3), tri[0], 0.3 * tri[0] + 0.7 * tri[2]):
+                pts.append(p)
+                tris.append(np.array(tri))
+    # Points in the plane of a proper triangle, inside and outside it, and at its corners.
+    for _ in range(40):
+        tri = rng.normal(size=(3, 3))
+        w = rng.normal(size=3)
+        pts.append(w @ tri / w.sum())
+        tris.append(tri)
+        pts.append(tri[rng.integers(3)])
+        tris.append(tri)
+    pts, tris = np.array(pts), np.array(tris)
+    got = point_triangle_distance(pts, tris)
+    want = np.array([naive.point_triangle_distance(p, *t) for p, t in zip(pts, tris)])
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+    assert np.all(got[-79::2] < 1e-12)  # a corner is on its triangle
+
+
+@pytest.mark.parametrize("case", ["soup", "small", "slab", "ceiling", "far_queries", "flat", "one_triangle"])
+def test_distances_to_triangles_matches_brute_force(case):
+    seeds = {"soup": 3, "small": 9, "slab": 10, "ceiling": 11, "far_queries": 4, "flat": 5, "one_triangle": 6}
+    rng = np.random.default_rng(seeds[case])
+    vertices = rng.random((120, 3))
+    faces = rng.integers(0, 120, size=(150, 3))  # includes degenerate faces with repeated corners
+    queries = rng.random((120, 3)) * 1.6 - 0.3
+    if case == "small":  # triangles much smaller than the grid cells
+        vertices = (rng.random((150, 1, 3)) + 0.02 * rng.normal(size=(150, 3, 3))).reshape(-1, 3)
+        faces = np.arange(450).reshape(150, 3)
+        queries = rng.random((300, 3)) * 1.2 - 0.1
+    if case in ("slab", "ceiling"):  # small triangles on the grid's floor, queries above: the nearest is often straight down
+        vertices = (rng.random((150, 1, 3)) * [1, 1, 0.03] + 0.02 * rng.normal(size=(150, 3, 3))).reshape(-1, 3)
+        faces = np.arange(450).reshape(150, 3)
+        queries = rng.random((300, 3)) + [0, 0, 0.1]
+        if case == "ceiling":  # upside down
+            vertices[:, 2] *= -1
+            queries[:, 2] *= -1
+    if case == "far_queries":
+        queries = queries * 30 + 5
+    if case == "flat":
+        vertices[:, 2] = 0.0
+        queries[:60, 2] = 0.0
+    if case == "one_triangle":
+        faces = faces[:1]
+    got = distances_to_triangles(queries, vertices, faces)
+    want = np.array([min(naive.point_triangle_distance(q, *vertices[f]) for f in faces) for q in queries])
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+def test_sample_triangles_are_on_their_triangles_and_repeatable():
+    rng = np.random.default_rng(8)
+    vertices = rng.normal(size=(10, 3))
+    faces = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7]])
+    a = sample_triangles(vertices, faces, 4, seed=3)
+    assert np.array_equal(a, sample_triangles(vertices, faces, 4, seed=3))
+    assert not np.array_equal(a, sample_triangles(vertices, faces, 4, seed=4))
+    assert a.shape == (8 + 3 + 3 * 4, 3)  # used vertices, centroids, random points
+    random_part = a[11:].reshape(3, 4, 3)
+    for f, pts in zip(faces, random_part):
+        assert max(naive.point_triangle_distance(p, *vertices[f]) for p in pts) < 1e-12

@@ -1,0 +1,234 @@
+"""The paroct command: mesh -> file -> check round trip, exit codes, one-line errors."""
+
+import re
+import subprocess
+import sys
+
+import manifold3d
+import meshio
+import numpy as np
+import pytest
+
+import paroct
+import paroct.mesher
+from paroct.cli import main
+from paroct.io import write_mesh
+from paroct.lattice import leaf_tets
+
+BOX = (1.0, 0.8, 0.6)
+BOX_ROTATION = (10.0, 20.0, 30.0)
+
+
+def _surface_arrays(solid=None):
+    solid = solid or manifold3d.Manifold.cube(list(BOX)).rotate(list(BOX_ROTATION))
+    m = solid.to_mesh64()
+    return np.asarray(m.vert_properties)[:, :3].copy(), np.asarray(m.tri_verts).astype(np.int64)
+
+
+def _write_surface(path, vertices=None, faces=None):
+    """An ASCII STL (or other meshio surface format, by extension) of the rotated box by default."""
+    if vertices is None:
+        vertices, faces = _surface_arrays()
+    with np.errstate(invalid="ignore", divide="ignore"):  # meshio's STL normals of NaN input
+        options = {"binary": False} if str(path).endswith(".stl") else {}
+        meshio.write(path, meshio.Mesh(vertices, [("triangle", faces)]), **options)
+    return path
+
+
+def _block(n=2):
+    g = np.arange(n)
+    anchors = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    coords, tets = leaf_tets(anchors, np.ones(len(anchors), dtype=np.int64))
+    return coords.astype(float), tets.astype(np.int64)
+
+
+def _run(capsys, *args):
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def _assert_one_line_error(rc, out, err, match):
+    assert rc == 2
+    assert out == ""
+    assert err.count("\n") == 1 and err.startswith("paroct: error: "), err
+    assert "Traceback" not in err
+    assert re.search(match, err), err
+
+
+def test_mesh_writes_a_vtu_that_checks_ok(tmp_path, capsys):
+    stl = _write_surface(tmp_path / "box.stl")
+    out = tmp_path / "box_mesh.vtu"
+    rc, text, err = _run(capsys, "mesh", stl, "-o", out, "--size", 0.1)
+    assert rc == 0, err
+    written = meshio.read(out)
+    tets = np.concatenate([b.data for b in written.cells if b.type == "tetra"])
+    n_tets = int(re.search(r": (\d+) tets, (\d+) vertices", text).group(1))
+    assert n_tets == len(tets) > 0
+    # Signed volumes from the file: all positive, total close to the box's.
+    p = written.points[tets]
+    vols = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
+    assert vols.min() > 0 and vols.sum() == pytest.approx(np.prod(BOX), rel=0.05)
+    assert re.search(r"^time \d+\.\d+ s$", text, re.M)
+
+    rc, report, err = _run(capsys, "check", out, "--against", stl)
+    assert rc == 0, report
+    assert report.splitlines()[-1] == "ok"
+    hausdorff = float(re.search(r"Hausdorff distance (\S+) x diagonal", report).group(1))
+    assert hausdorff < 0.1 / np.linalg.norm(BOX)  # the boundary is within one element size of the surface
+
+
+def test_default_output_is_the_surface_stem_in_the_current_folder(tmp_path, capsys, monkeypatch):
+    (tmp_path / "in").mkdir()
+    (tmp_path / "work").mkdir()
+    stl = _write_surface(tmp_path / "in" / "part.stl")
+    monkeypatch.chdir(tmp_path / "work")
+    rc, out, err = _run(capsys, "mesh", stl, "--divisions", 8, "--quiet")
+    assert rc == 0, err
+    assert out == ""  # --quiet
+    assert (tmp_path / "work" / "part.vtu").is_file() and not (tmp_path / "in" / "part.vtu").exists()
+
+
+def test_verbose_reports_stages_as_they_end_and_their_times(tmp_path, capsys):
+    stl = _write_surface(tmp_path / "box.stl")
+    rc, out, err = _run(capsys, "mesh", stl, "-o", tmp_path / "a.vtu", "--divisions", 8, "--verbose")
+    assert rc == 0, err
+    done = re.findall(r"^paroct: (\w+) done$", err, re.M)
+    timed = re.findall(r"^  (\w+) +\d+\.\d+ s$", out, re.M)
+    assert done and set(done) <= set(timed) and "write" in timed
+    rc, out, err = _run(capsys, "mesh", stl, "-o", tmp_path / "b.vtu", "--divisions", 8)
+    assert rc == 0
+    assert "done" not in err and not re.search(r"^  \w+ +\d", out, re.M)
+    assert re.search(r"^time \d+\.\d+ s$", out, re.M)
+    # Same input, same options: the same bytes.
+    assert (tmp_path / "a.vtu").read_bytes() == (tmp_path / "b.vtu").read_bytes()
+
+
+def test_mesher_warnings_are_one_line_each_on_stderr(tmp_path, capsys, monkeypatch):
+    real = paroct.mesher.mesh
+
+    def warned(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.report.warnings.extend(["the fin was lost", "two\nlines"])
+        return result
+
+    monkeypatch.setattr(paroct.mesher, "mesh", warned)
+    stl = _write_surface(tmp_path / "box.stl")
+    rc, out, err = _run(capsys, "mesh", stl, "-o", tmp_path / "a.vtu", "--divisions", 8)
+    assert rc == 0
+    lines = err.splitlines()
+    assert "paroct: warning: the fin was lost" in lines and "paroct: warning: two; lines" in lines
+    assert "paroct: warning" not in out
+
+
+def test_interrupt_exits_130(tmp_path, capsys, monkeypatch):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(paroct.mesher, "mesh", interrupted)
+    rc, out, err = _run(capsys, "mesh", _write_surface(tmp_path / "box.stl"))
+    assert rc == 130 and err == "paroct: interrupted\n" and "Traceback" not in err
+
+
+def test_bad_output_is_refused_before_meshing(tmp_path, capsys, monkeypatch):
+    def never(*args, **kwargs):
+        raise AssertionError("meshed although the output was bad")
+
+    monkeypatch.setattr(paroct.mesher, "mesh", never)
+    stl = _write_surface(tmp_path / "box.stl")
+    for out, match in [("out.xyz", "unknown mesh format"), ("out.stl", "surfaces only"), ("no/such/out.vtu", "does not exist")]:
+        _assert_one_line_error(*_run(capsys, "mesh", stl, "-o", tmp_path / out), match)
+
+
+def _open_box(tmp_path):
+    v, f = _surface_arrays()
+    return _write_surface(tmp_path / "open.stl", v, f[1:])
+
+
+def _nan_box(tmp_path):
+    v, f = _surface_arrays()
+    v[0, 0] = np.nan
+    return _write_surface(tmp_path / "nan.stl", v, f)
+
+
+def _unknown_extension(tmp_path):
+    path = tmp_path / "part.xyz"
+    path.write_text("1 2 3\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    "make_args,match",
+    [
+        (lambda t, s: ["mesh", t / "missing.stl"], "no such file"),
+        (lambda t, s: ["mesh", _unknown_extension(t)], "unknown surface format '.xyz'"),
+        (lambda t, s: ["mesh", _open_box(t)], r"open surface, \d+ boundary edges"),
+        (lambda t, s: ["mesh", _nan_box(t)], "NaN"),
+        (lambda t, s: ["mesh", s, "--size", "0"], "size = 0"),
+        (lambda t, s: ["mesh", s, "--size", "-1"], "size = -1"),
+        (lambda t, s: ["mesh", s, "--size", "nan"], "size = nan"),
+        (lambda t, s: ["mesh", s, "--divisions", "0"], "divisions = 0"),
+        (lambda t, s: ["mesh", s, "--size", "abc"], "invalid float value: 'abc'"),
+        (lambda t, s: ["mesh", s, "--size", "1", "--divisions", "3"], "not allowed with"),
+        (lambda t, s: ["mesh", s, "--max-memory", "0"], "--max-memory 0"),
+        (lambda t, s: ["mesh", s, "--size", "1e-4", "--max-memory", "1"], "GiB"),
+        (lambda t, s: ["mesh", s, "-o", t / "out.xyz"], "unknown mesh format"),
+        (lambda t, s: ["mesh"], "required: SURFACE"),
+        (lambda t, s: [], "choose a command"),
+        (lambda t, s: ["frobnicate"], "invalid choice"),
+        (lambda t, s: ["check", t / "missing.vtu"], "no such file"),
+        (lambda t, s: ["check", s], "no tetrahedra"),
+        (lambda t, s: ["check", t / "good.vtu", "--against", _open_box(t)], "open surface"),
+    ],
+)
+def test_user_errors_are_one_line_with_exit_2(tmp_path, capsys, make_args, match):
+    stl = _write_surface(tmp_path / "box.stl")
+    points, tets = _block()
+    write_mesh(tmp_path / "good.vtu", points, tets)
+    _assert_one_line_error(*_run(capsys, *make_args(tmp_path, stl)), match)
+
+
+def test_check_passes_a_valid_mesh_and_fails_broken_ones(tmp_path, capsys):
+    points, tets = _block(3)
+    write_mesh(tmp_path / "good.vtu", points, tets)
+    rc, out, _ = _run(capsys, "check", tmp_path / "good.vtu")
+    assert rc == 0 and out.splitlines()[-1] == "ok"
+
+    flipped = tets.copy()
+    flipped[0, [0, 1]] = flipped[0, [1, 0]]
+    write_mesh(tmp_path / "inverted.vtu", points, flipped)
+    rc, out, _ = _run(capsys, "check", tmp_path / "inverted.vtu")
+    assert rc == 1
+    assert "FAIL: 1 of 162 tets are inverted or flat (signed volume <= 0)" in out.splitlines()
+
+    # Two tets sharing only an edge: the boundary is not a manifold.
+    pts = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    write_mesh(tmp_path / "bowtie.msh", pts, np.array([[0, 2, 3, 1], [0, 4, 5, 1]]))
+    rc, out, _ = _run(capsys, "check", tmp_path / "bowtie.msh")
+    assert rc == 1
+    assert any(line.startswith("FAIL: boundary not closed and manifold: 1 of its edges") for line in out.splitlines())
+
+
+def test_paper_table_command(capsys):
+    rc, out, err = _run(capsys, "paper-table")
+    assert rc == 0 and err == ""
+    assert "0.948683" in out and "Errata:" in out
+
+
+def test_version_and_help(capsys):
+    rc, out, _ = _run(capsys, "--version")
+    assert rc == 0 and out.strip() == f"paroct {paroct.__version__}"
+    rc, out, _ = _run(capsys, "mesh", "--help")
+    assert rc == 0 and "--divisions" in out
+
+
+def test_python_dash_m_paroct(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "paroct", "--version"], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0 and done.stdout.strip() == f"paroct {paroct.__version__}"
+    done = subprocess.run([sys.executable, "-m", "paroct", "mesh", "missing.stl"], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 2 and done.stderr == "paroct: error: no such file: missing.stl\n"
+    # In a real process (no pytest warning capture), reading an ASCII STL adds no warning lines.
+    _open_box(tmp_path)
+    done = subprocess.run([sys.executable, "-m", "paroct", "mesh", "open.stl"], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 2 and done.stderr.startswith("paroct: error: open.stl: open surface")
+    assert done.stderr.count("\n") == 1, done.stderr
