@@ -13,7 +13,18 @@ import numba as nb
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, morton_coords, morton_decode, morton_key, morton_keys, octant_is_ancestor, octant_last_key, octant_overlaps
+from .octant import (
+    MAX_LEVEL,
+    morton_coords,
+    morton_decode,
+    morton_key,
+    morton_keys,
+    octant_is_ancestor,
+    octant_last_key,
+    octant_len,
+    octant_overlaps,
+    octant_parent_key,
+)
 
 
 @nb.njit(cache=True)
@@ -171,3 +182,136 @@ def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndar
     g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 3)
     offsets = np.sort(morton_keys(g << (MAX_LEVEL - level_to)))
     return (keys[:, None] | offsets[None, :]).ravel()
+
+
+@nb.njit(cache=True)
+def _seed_range_max_level(keys, levels, lo_key, hi_key):
+    """Largest level among sorted seeds with lo_key <= key <= hi_key, or -1."""
+    i = np.searchsorted(keys, lo_key)
+    best = -1
+    n = keys.shape[0]
+    while i < n and keys[i] <= hi_key:
+        if levels[i] > best:
+            best = levels[i]
+        i += 1
+    return best
+
+
+@nb.njit(cache=True)
+def complete_from_seeds(keys, levels):
+    """The coarsest complete linear octree in which every seed is a leaf or refined.
+
+    keys, levels: seed octants sorted by key (duplicates and overlaps allowed).  An octant is
+    split iff a seed is a strict descendant of it; leaves come out in Morton order.
+    Returns (keys (N,) int64, levels (N,) int8).
+    """
+    out_keys = np.empty(1024, dtype=np.int64)
+    out_levels = np.empty(1024, dtype=np.int8)
+    n = 0
+    stack_keys = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
+    stack_levels = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
+    stack_keys[0] = 0
+    stack_levels[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        key = stack_keys[top]
+        lev = stack_levels[top]
+        deepest = _seed_range_max_level(keys, levels, key, octant_last_key(key, lev))
+        if deepest > lev:
+            step = 3 * (MAX_LEVEL - lev - 1)
+            for c in range(7, -1, -1):
+                stack_keys[top] = key | (np.int64(c) << step)
+                stack_levels[top] = lev + 1
+                top += 1
+            continue
+        if n == out_keys.shape[0]:
+            out_keys = np.concatenate((out_keys, np.empty(n, dtype=np.int64)))
+            out_levels = np.concatenate((out_levels, np.empty(n, dtype=np.int8)))
+        out_keys[n] = key
+        out_levels[n] = lev
+        n += 1
+    return out_keys[:n].copy(), out_levels[:n].copy()
+
+
+@nb.njit(cache=True)
+def _insulation_parents(keys, levels, level):
+    """The 26 neighbours (level - 1, inside the root) of the parents of the octants at ``level``.
+
+    Splitting a parent makes all eight children leaves of ``level``, so each of them needs its
+    neighbours at ``level - 1`` or finer: those are the parent's same-size neighbours.
+    """
+    side = octant_len(level - 1)
+    root = np.int64(1) << MAX_LEVEL
+    out = np.empty(26 * keys.shape[0] + 1, dtype=np.int64)
+    m = 0
+    for i in range(keys.shape[0]):
+        if levels[i] != level:
+            continue
+        x, y, z = morton_coords(octant_parent_key(keys[i], level))
+        for dz in range(-1, 2):
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    if dx == 0 and dy == 0 and dz == 0:
+                        continue
+                    nx = x + dx * side
+                    ny = y + dy * side
+                    nz = z + dz * side
+                    if nx < 0 or ny < 0 or nz < 0 or nx >= root or ny >= root or nz >= root:
+                        continue
+                    out[m] = morton_key(nx, ny, nz)
+                    m += 1
+    return out[:m]
+
+
+def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The coarsest complete 2:1-balanced octree refining the given octants (face, edge and corner balance).
+
+    Ripple propagation from the finest level up (Sundar, Sampath & Biros 2008, Sec. 4): an
+    octant of level l splits its parent, so the parent's 26 neighbours (level l - 1) must be
+    leaves or refined; those seeds then propagate from level l - 1.  Input: octants (not necessarily
+    linear or complete), any order.  Returns (keys, levels) sorted, complete and balanced.
+    """
+    keys = np.asarray(keys, dtype=np.int64)
+    levels = np.asarray(levels, dtype=np.int8)
+    seeds_k, seeds_l = [keys], [levels]
+    current_k, current_l = keys, levels
+    for level in range(int(levels.max(initial=0)), 1, -1):
+        parents = np.unique(_insulation_parents(current_k, current_l, level))
+        seeds_k.append(parents)
+        seeds_l.append(np.full(parents.shape[0], level - 1, dtype=np.int8))
+        current_k = np.concatenate([current_k, parents])
+        current_l = np.concatenate([current_l, seeds_l[-1]])
+    all_k = np.concatenate(seeds_k)
+    all_l = np.concatenate(seeds_l)
+    order = np.lexsort((all_l, all_k))
+    return complete_from_seeds(all_k[order], all_l[order])
+
+
+@nb.njit(cache=True)
+def tree_is_balanced(keys, levels):
+    """True iff no two leaves that touch (share a face, edge or corner) differ by more than one level.
+
+    Checked from the finer side: a point of each of the 26 same-size neighbour cells of a leaf
+    of level l must lie in a leaf of level >= l - 1 (a coarser leaf touching it contains one of
+    those cells whole).  Input must be complete (tree_is_complete).
+    """
+    root = np.int64(1) << MAX_LEVEL
+    for i in range(keys.shape[0]):
+        x, y, z = morton_coords(keys[i])
+        side = octant_len(levels[i])
+        for dz in range(-1, 2):
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    if dx == 0 and dy == 0 and dz == 0:
+                        continue
+                    # A probe point in the neighbouring region: one unit outside, anywhere along the touching part.
+                    px = x - 1 if dx < 0 else (x + side if dx > 0 else x)
+                    py = y - 1 if dy < 0 else (y + side if dy > 0 else y)
+                    pz = z - 1 if dz < 0 else (z + side if dz > 0 else z)
+                    if px < 0 or py < 0 or pz < 0 or px >= root or py >= root or pz >= root:
+                        continue
+                    j = np.searchsorted(keys, morton_key(px, py, pz), side="right") - 1
+                    if levels[j] < levels[i] - 1:
+                        return False
+    return True

@@ -1,0 +1,95 @@
+"""Octree algorithms against slow, obvious twins on random trees (fixed seeds)."""
+
+import numpy as np
+import pytest
+
+from paroct import octant
+from paroct.octree import balance, complete_from_seeds, tree_is_balanced, tree_is_complete, tree_is_linear
+
+ML = octant.MAX_LEVEL
+
+
+def _box(key, level):
+    x, y, z = octant.morton_decode(np.array([key]))[0]
+    side = 1 << (ML - int(level))
+    return np.array([x, y, z]), side
+
+
+def _touch(a, la, b, lb):
+    (pa, sa), (pb, sb) = _box(a, la), _box(b, lb)
+    return all(pa[i] <= pb[i] + sb and pb[i] <= pa[i] + sa for i in range(3))
+
+
+def naive_is_balanced(keys, levels):
+    """All pairs: touching leaves differ by at most one level."""
+    for i in range(len(keys)):
+        for j in range(i + 1, len(keys)):
+            if abs(int(levels[i]) - int(levels[j])) > 1 and _touch(keys[i], levels[i], keys[j], levels[j]):
+                return False
+    return True
+
+
+def naive_balance(keys, levels):
+    """Split the coarser leaf of any unbalanced touching pair until none is left."""
+    leaves = {(int(k), int(l)) for k, l in zip(*complete_from_seeds(keys, levels))}
+    changed = True
+    while changed:
+        changed = False
+        items = sorted(leaves)
+        for a, la in items:
+            for b, lb in items:
+                if lb > la + 1 and _touch(a, la, b, lb):
+                    leaves.discard((a, la))
+                    step = 3 * (ML - la - 1)
+                    leaves |= {(a | (c << step), la + 1) for c in range(8)}
+                    changed = True
+                    break
+            if changed:
+                break
+    out = sorted(leaves)
+    return np.array([k for k, _ in out], dtype=np.int64), np.array([l for _, l in out], dtype=np.int8)
+
+
+def _random_seeds(rng, n, max_level):
+    levels = rng.integers(1, max_level + 1, size=n)
+    keys = []
+    for lev in levels:
+        side = 1 << (ML - lev)
+        keys.append(octant.morton_key(*(rng.integers(0, 1 << lev, size=3) * side)))
+    keys = np.array(keys, dtype=np.int64)
+    order = np.lexsort((levels, keys))
+    return keys[order], levels[order].astype(np.int8)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_complete_from_seeds_covers_root_and_keeps_seeds(seed):
+    rng = np.random.default_rng(seed)
+    keys, levels = _random_seeds(rng, 6, 4)
+    ck, cl = complete_from_seeds(keys, levels)
+    assert tree_is_complete(ck, cl)
+    # Every seed is a leaf or refined: the leaf at its anchor is at least as fine.
+    for k, lev in zip(keys, levels):
+        j = np.searchsorted(ck, k, side="right") - 1
+        assert cl[j] >= lev
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_balance_matches_naive_splitting(seed):
+    rng = np.random.default_rng(100 + seed)
+    keys, levels = _random_seeds(rng, 3, 5)
+    bk, bl = balance(keys, levels)
+    assert tree_is_complete(bk, bl) and tree_is_linear(bk, bl)
+    assert tree_is_balanced(bk, bl) and naive_is_balanced(bk, bl)
+    nk, nl = naive_balance(keys, levels)
+    assert np.array_equal(bk, nk) and np.array_equal(bl, nl)
+
+
+def test_tree_is_balanced_detects_a_corner_violation():
+    # A level-4 octant at the far corner of the first level-1 octant touches the other level-1
+    # leaves at a corner: completion alone leaves it three levels finer than them.
+    c = (1 << (ML - 1)) - (1 << (ML - 4))
+    seed = np.array([octant.morton_key(c, c, c)], dtype=np.int64)
+    keys, levels = complete_from_seeds(seed, np.array([4], dtype=np.int8))
+    assert not tree_is_balanced(keys, levels) and not naive_is_balanced(keys, levels)
+    bk, bl = balance(seed, np.array([4], dtype=np.int8))
+    assert tree_is_balanced(bk, bl) and naive_is_balanced(bk, bl)
