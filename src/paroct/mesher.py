@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numba as nb
 import numpy as np
 
 from . import rays
@@ -22,7 +23,7 @@ from .octant import MAX_LEVEL
 from .octree import octant_lattice_anchors, refine_to_level, touched_cells, uniform_leaves
 from .quality import tet_quality
 from .repair import remove_pinches
-from .stuffing import CutEdges, _collect_cut_edges, stuff, warp_targets
+from .stuffing import CutEdges, _collect_cut_edges, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
@@ -264,7 +265,8 @@ def solid_leaves(frame: FatFrame, snapped, faces, x_crossings: rays.RowCrossings
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
     """Cut points of every lattice edge of the tets whose ends differ in class."""
-    starts, ends, dirs, *table = _collect_cut_edges(np.ascontiguousarray(tets, dtype=np.int64), inside, coords)
+    mixed = np.ascontiguousarray(tets[mixed_tets(tets, inside)])
+    starts, ends, dirs, *table = _collect_cut_edges(mixed, inside, coords)
     fracs = np.empty(starts.shape[0])
     for d in range(EDGE_DIRECTIONS.shape[0]):
         sel = np.nonzero(dirs == d)[0]
@@ -283,8 +285,17 @@ def _compact(points, tets):
     """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order."""
     used = np.zeros(points.shape[0], dtype=bool)
     used[tets.ravel()] = True
-    new_id = np.cumsum(used) - 1
-    return np.ascontiguousarray(points[used]), new_id[tets].astype(np.int32)
+    new_id = (np.cumsum(used) - 1).astype(np.int32)
+    return np.ascontiguousarray(points[used]), _renumber(tets, new_id)
+
+
+@nb.njit(cache=True, parallel=True)
+def _renumber(tets, new_id):
+    out = np.empty((tets.shape[0], 4), dtype=np.int32)
+    for t in nb.prange(tets.shape[0]):
+        for i in range(4):
+            out[t, i] = new_id[tets[t, i]]
+    return out
 
 
 def _measure(points, tets, core, faces, report: MeshReport) -> None:

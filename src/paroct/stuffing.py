@@ -61,6 +61,16 @@ def _lookup(table_a, table_b, bits, a, b):
         s = (s + 1) & mask
 
 
+@nb.njit(cache=True, parallel=True)
+def mixed_tets(tets, inside):
+    """Mask (M,) of tets whose vertices are not all of one class."""
+    out = np.empty(tets.shape[0], dtype=np.bool_)
+    for t in nb.prange(tets.shape[0]):
+        c = inside[tets[t, 0]]
+        out[t] = c != inside[tets[t, 1]] or c != inside[tets[t, 2]] or c != inside[tets[t, 3]]
+    return out
+
+
 @nb.njit(cache=True)
 def _collect_cut_edges(tets, inside, coords):
     """Unique lattice edges of tets whose ends differ in class.
@@ -252,101 +262,136 @@ def _emit(out, k, v0, v1, v2, v3):
     return k + 1
 
 
-@nb.njit(cache=True)
-def _stencils(tets, signs, coords, table_a, table_b, table_edge, bits, n_lattice, prism, out, count_only):
-    """Stencil tets of every lattice tet; returns the number written (or needed, if count_only)."""
-    k = 0
-    plus = np.empty(4, dtype=np.int64)
-    zero = np.empty(4, dtype=np.int64)
-    minus = np.empty(4, dtype=np.int64)
-    pv = np.empty(6, dtype=np.int64)
-    for t in range(tets.shape[0]):
+@nb.njit(cache=True, parallel=True)
+def _stencil_counts(tets, signs):
+    """Number of output tets (0..3) of every lattice tet, from its sign pattern alone."""
+    n = tets.shape[0]
+    counts = np.empty(n, dtype=np.int64)
+    for t in nb.prange(n):
         n_p = 0
         n_z = 0
         n_m = 0
         for i in range(4):
-            v = tets[t, i]
-            if signs[v] > 0:
-                plus[n_p] = v
+            s = signs[tets[t, i]]
+            if s > 0:
                 n_p += 1
-            elif signs[v] < 0:
-                minus[n_m] = v
+            elif s < 0:
                 n_m += 1
             else:
-                zero[n_z] = v
                 n_z += 1
         if n_p == 0:
-            continue
-        if n_m == 0:
-            if not count_only:
-                _emit(out, k, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
-            k += 1
-            continue
-        if n_p == 1:
-            if not count_only:
-                a = plus[0]
-                w = np.empty(4, dtype=np.int64)
-                for i in range(4):
-                    v = tets[t, i]
-                    w[i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, v) if signs[v] < 0 else v
-                _emit(out, k, w[0], w[1], w[2], w[3])
-            k += 1
-            continue
-        if n_p == 2 and n_z == 1:
-            if not count_only:
-                a = plus[0]
-                b = plus[1]
-                z = zero[0]
-                e = minus[0]
-                cae = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, e)
-                cbe = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, e)
-                if _quad_first_diagonal(coords, a, b, e):
-                    _emit(out, k, z, a, b, cbe)
-                    _emit(out, k + 1, z, a, cbe, cae)
-                else:
-                    _emit(out, k, z, a, b, cae)
-                    _emit(out, k + 1, z, b, cbe, cae)
-            k += 2
-            continue
-        # Prisms: 2 + and 2 -, or 3 + and 1 -.
-        if not count_only:
-            if n_p == 2:
-                a = plus[0]
-                b = plus[1]
-                c = minus[0]
-                d = minus[1]
-                pv[0] = a
-                pv[1] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, c)
-                pv[2] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, d)
-                pv[3] = b
-                pv[4] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, c)
-                pv[5] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, d)
-                choice = 0
-                # quad 0 = (a, cut ac, cut bc, b): bit 0 clear joins a to cut bc.
-                if not _quad_first_diagonal(coords, a, b, c):
-                    choice |= 1
-                # quad 2 = (cut ad, a, b, cut bd): bit 2 set joins a to cut bd.
-                if _quad_first_diagonal(coords, a, b, d):
-                    choice |= 4
-                # quad 1 lies on the cut surface; the two lattice faces' diagonals leave one
-                # non-cyclic choice for it (the rule always crosses them).
-                if prism[choice, 0, 0] < 0:
-                    choice |= 2
-            else:
-                for i in range(3):
-                    pv[i] = plus[i]
-                    pv[3 + i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, plus[i], minus[0])
-                choice = 0
-                for i in range(3):
-                    j = (i + 1) % 3
-                    if not _quad_first_diagonal(coords, pv[i], pv[j], minus[0]):
-                        choice |= 1 << i
-            if prism[choice, 0, 0] < 0:
-                raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
-            for i in range(3):
-                _emit(out, k + i, pv[prism[choice, i, 0]], pv[prism[choice, i, 1]], pv[prism[choice, i, 2]], pv[prism[choice, i, 3]])
-        k += 3
-    return k
+            counts[t] = 0
+        elif n_m == 0 or n_p == 1:
+            counts[t] = 1
+        elif n_p == 2 and n_z == 1:
+            counts[t] = 2
+        else:
+            counts[t] = 3
+    return counts
+
+
+@nb.njit(cache=True)
+def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch):
+    """Write the stencil tets of lattice tet t from out[k] on; returns whether the lattice tet
+    was cut or warped (False: it is copied untouched)."""
+    table_a, table_b, table_edge, bits = table
+    plus = scratch[0]
+    zero = scratch[1]
+    minus = scratch[2]
+    pv = scratch[3]
+    n_p = 0
+    n_z = 0
+    n_m = 0
+    for i in range(4):
+        v = tets[t, i]
+        if signs[v] > 0:
+            plus[n_p] = v
+            n_p += 1
+        elif signs[v] < 0:
+            minus[n_m] = v
+            n_m += 1
+        else:
+            zero[n_z] = v
+            n_z += 1
+    if n_p == 0:
+        return True
+    if n_m == 0:
+        _emit(out, k, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3])
+        return n_z > 0
+    if n_p == 1:
+        # Each outside vertex moves to the cut on its edge to the inside vertex: orientation kept.
+        a = plus[0]
+        for i in range(4):
+            v = tets[t, i]
+            pv[i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, v) if signs[v] < 0 else v
+        _emit(out, k, pv[0], pv[1], pv[2], pv[3])
+        return True
+    if n_p == 2 and n_z == 1:
+        a = plus[0]
+        b = plus[1]
+        z = zero[0]
+        e = minus[0]
+        cae = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, e)
+        cbe = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, e)
+        if _quad_first_diagonal(coords, a, b, e):
+            _emit(out, k, z, a, b, cbe)
+            _emit(out, k + 1, z, a, cbe, cae)
+        else:
+            _emit(out, k, z, a, b, cae)
+            _emit(out, k + 1, z, b, cbe, cae)
+        return True
+    # Prisms: 2 + and 2 -, or 3 + and 1 -.
+    if n_p == 2:
+        a = plus[0]
+        b = plus[1]
+        c = minus[0]
+        d = minus[1]
+        pv[0] = a
+        pv[1] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, c)
+        pv[2] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, d)
+        pv[3] = b
+        pv[4] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, c)
+        pv[5] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, d)
+        choice = 0
+        # quad 0 = (a, cut ac, cut bc, b): bit 0 clear joins a to cut bc.
+        if not _quad_first_diagonal(coords, a, b, c):
+            choice |= 1
+        # quad 2 = (cut ad, a, b, cut bd): bit 2 set joins a to cut bd.
+        if _quad_first_diagonal(coords, a, b, d):
+            choice |= 4
+        # quad 1 lies on the cut surface; the two lattice faces' diagonals leave one
+        # non-cyclic choice for it (the rule always crosses them).
+        if prism[choice, 0, 0] < 0:
+            choice |= 2
+    else:
+        for i in range(3):
+            pv[i] = plus[i]
+            pv[3 + i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, plus[i], minus[0])
+        choice = 0
+        for i in range(3):
+            j = (i + 1) % 3
+            if not _quad_first_diagonal(coords, pv[i], pv[j], minus[0]):
+                choice |= 1 << i
+    if prism[choice, 0, 0] < 0:
+        raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
+    for i in range(3):
+        _emit(out, k + i, pv[prism[choice, i, 0]], pv[prism[choice, i, 1]], pv[prism[choice, i, 2]], pv[prism[choice, i, 3]])
+    return True
+
+
+@nb.njit(cache=True, parallel=True)
+def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touched):
+    """Stencil tets of lattice tet t into out[offsets[t]:offsets[t + 1]], in parallel chunks;
+    touched[k] is False for output tets that are untouched lattice tets."""
+    n = tets.shape[0]
+    n_chunks = min(n, 256)
+    for chunk in nb.prange(n_chunks):
+        scratch = np.empty((4, 6), dtype=np.int64)
+        for t in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            k = offsets[t]
+            cut = _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch)
+            for i in range(k, offsets[t + 1]):
+                touched[i] = cut
 
 
 @nb.njit(cache=True, parallel=True)
@@ -370,7 +415,7 @@ def _orient(points, tets):
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
           cuts: CutEdges, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int64), unused points kept.
+    """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points kept.
 
     lattice_points: (V, 3) space positions of the lattice vertices; coords: (V, 3) their
     lattice coordinates; tets: (T, 4) lattice tets; inside: (V,) class of each vertex;
@@ -385,12 +430,11 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     signs[warped] = 0
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     table_a, table_b, table_edge, bits = cuts.table
-    args = (tets, signs, coords, table_a, table_b, table_edge, bits, n_lattice, PRISM_TETS)
-    n = _stencils(*args, np.empty((0, 4), dtype=np.int64), True)
-    out = np.empty((n, 4), dtype=np.int64)
-    _stencils(*args, out, False)
-    touched = signs[out[:, :4].clip(max=n_lattice - 1)].min(axis=1) <= 0
-    touched |= (out >= n_lattice).any(axis=1)
+    offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
+    np.cumsum(_stencil_counts(tets, signs), out=offsets[1:])
+    out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
+    touched = np.empty(out.shape[0], dtype=np.bool_)
+    _stencils(tets, signs, coords, cuts.table, n_lattice, PRISM_TETS, offsets, out, touched)
     sub = np.ascontiguousarray(out[touched])
     flat = _orient(points, sub)  # untouched lattice tets are positive by construction
     out[touched] = sub
