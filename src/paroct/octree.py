@@ -79,15 +79,21 @@ def octant_lattice_anchors(keys: np.ndarray, frame: FatFrame) -> np.ndarray:
     return morton_decode(keys) >> (MAX_LEVEL - frame.levels)
 
 
+_DROP, _LEAF, _SPLIT = 0, 1, 2
+
+
 @nb.njit(cache=True)
-def _descend_to_box(lo, hi, frame_levels, level):
-    """Keys of the octants of ``level`` whose parallelepiped meets the box [lo, hi] (lattice-scaled
-    space coordinates), depth first with children in Morton order, so the output is sorted."""
-    shift = MAX_LEVEL - frame_levels
-    out = np.empty(1024, dtype=np.int64)
+def _depth_first(decide, args):
+    """Octants from a depth-first descent from the root, children in Morton order (so sorted).
+
+    decide(key, level, args) says what to do with each octant: _DROP it, keep it as a _LEAF,
+    or _SPLIT it into its eight children.  Returns (keys (N,) int64, levels (N,) int8).
+    """
+    out_keys = np.empty(1024, dtype=np.int64)
+    out_levels = np.empty(1024, dtype=np.int8)
     n = 0
-    stack_keys = np.empty(8 * (level + 1), dtype=np.int64)
-    stack_levels = np.empty(8 * (level + 1), dtype=np.int64)
+    stack_keys = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
+    stack_levels = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
     stack_keys[0] = 0
     stack_levels[0] = 0
     top = 1
@@ -95,31 +101,42 @@ def _descend_to_box(lo, hi, frame_levels, level):
         top -= 1
         key = stack_keys[top]
         lev = stack_levels[top]
-        ax, ay, az = morton_coords(key)
-        ax >>= shift
-        ay >>= shift
-        az >>= shift
-        side = float(np.int64(1) << (frame_levels - lev))
-        # Each row of LATTICE_TO_SPACE is a permutation of (1/2, 1/2, -1/2): over the cube
-        # anchor + [0, side]^3 a space coordinate spans [c - side/2, c + side].
-        c0 = 0.5 * (ax + ay - az)
-        c1 = 0.5 * (-ax + ay + az)
-        c2 = 0.5 * (ax - ay + az)
-        if (c0 + side < lo[0] or c0 - side / 2 > hi[0] or c1 + side < lo[1] or c1 - side / 2 > hi[1]
-                or c2 + side < lo[2] or c2 - side / 2 > hi[2]):
-            continue
-        if lev == level:
-            if n == out.shape[0]:
-                out = np.concatenate((out, np.empty(n, dtype=np.int64)))
-            out[n] = key
+        action = decide(key, lev, args)
+        if action == _SPLIT:
+            step = 3 * (MAX_LEVEL - lev - 1)
+            for c in range(7, -1, -1):
+                stack_keys[top] = key | (np.int64(c) << step)
+                stack_levels[top] = lev + 1
+                top += 1
+        elif action == _LEAF:
+            if n == out_keys.shape[0]:
+                out_keys = np.concatenate((out_keys, np.empty(n, dtype=np.int64)))
+                out_levels = np.concatenate((out_levels, np.empty(n, dtype=np.int8)))
+            out_keys[n] = key
+            out_levels[n] = lev
             n += 1
-            continue
-        step = 3 * (MAX_LEVEL - lev - 1)
-        for c in range(7, -1, -1):
-            stack_keys[top] = key | (np.int64(c) << step)
-            stack_levels[top] = lev + 1
-            top += 1
-    return out[:n].copy()
+    return out_keys[:n].copy(), out_levels[:n].copy()
+
+
+@nb.njit(cache=True)
+def _meets_box(key, lev, args):
+    """Split down to ``level`` the octants whose parallelepiped meets the box (lattice-scaled space)."""
+    lo, hi, frame_levels, level = args
+    shift = MAX_LEVEL - frame_levels
+    ax, ay, az = morton_coords(key)
+    ax >>= shift
+    ay >>= shift
+    az >>= shift
+    side = float(np.int64(1) << (frame_levels - lev))
+    # Each row of LATTICE_TO_SPACE is a permutation of (1/2, 1/2, -1/2): over the cube
+    # anchor + [0, side]^3 a space coordinate spans [c - side/2, c + side].
+    c0 = 0.5 * (ax + ay - az)
+    c1 = 0.5 * (-ax + ay + az)
+    c2 = 0.5 * (ax - ay + az)
+    if (c0 + side < lo[0] or c0 - side / 2 > hi[0] or c1 + side < lo[1] or c1 - side / 2 > hi[1]
+            or c2 + side < lo[2] or c2 - side / 2 > hi[2]):
+        return _DROP
+    return _LEAF if lev == level else _SPLIT
 
 
 def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
@@ -131,8 +148,7 @@ def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, le
         raise ValueError(f"level = {level} is outside 0..{frame.levels}")
     lo = (np.asarray(box_min, dtype=np.float64) - frame.origin) / frame.h
     hi = (np.asarray(box_max, dtype=np.float64) - frame.origin) / frame.h
-    keys = _descend_to_box(lo, hi, frame.levels, level)
-    return keys, np.full(keys.shape[0], level, dtype=np.int8)
+    return _depth_first(_meets_box, (lo, hi, np.int64(frame.levels), np.int64(level)))
 
 
 @nb.njit(cache=True)
@@ -198,40 +214,18 @@ def _seed_range_max_level(keys, levels, lo_key, hi_key):
 
 
 @nb.njit(cache=True)
-def complete_from_seeds(keys, levels):
+def _has_deeper_seed(key, lev, args):
+    keys, levels = args
+    return _SPLIT if _seed_range_max_level(keys, levels, key, octant_last_key(key, lev)) > lev else _LEAF
+
+
+def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The coarsest complete linear octree in which every seed is a leaf or refined.
 
     keys, levels: seed octants sorted by key (duplicates and overlaps allowed).  An octant is
-    split iff a seed is a strict descendant of it; leaves come out in Morton order.
-    Returns (keys (N,) int64, levels (N,) int8).
+    split iff a seed is a strict descendant of it.  Returns (keys (N,) int64, levels (N,) int8).
     """
-    out_keys = np.empty(1024, dtype=np.int64)
-    out_levels = np.empty(1024, dtype=np.int8)
-    n = 0
-    stack_keys = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
-    stack_levels = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
-    stack_keys[0] = 0
-    stack_levels[0] = 0
-    top = 1
-    while top > 0:
-        top -= 1
-        key = stack_keys[top]
-        lev = stack_levels[top]
-        deepest = _seed_range_max_level(keys, levels, key, octant_last_key(key, lev))
-        if deepest > lev:
-            step = 3 * (MAX_LEVEL - lev - 1)
-            for c in range(7, -1, -1):
-                stack_keys[top] = key | (np.int64(c) << step)
-                stack_levels[top] = lev + 1
-                top += 1
-            continue
-        if n == out_keys.shape[0]:
-            out_keys = np.concatenate((out_keys, np.empty(n, dtype=np.int64)))
-            out_levels = np.concatenate((out_levels, np.empty(n, dtype=np.int8)))
-        out_keys[n] = key
-        out_levels[n] = lev
-        n += 1
-    return out_keys[:n].copy(), out_levels[:n].copy()
+    return _depth_first(_has_deeper_seed, (np.asarray(keys, dtype=np.int64), np.asarray(levels, dtype=np.int8)))
 
 
 @nb.njit(cache=True)
