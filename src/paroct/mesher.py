@@ -29,8 +29,9 @@ from .topology import surface_topology
 
 #: Default element size as a fraction of the bounding-box diagonal.
 DEFAULT_DIVISIONS = 40
-#: Peak bytes per lattice tet of the box around the solid, measured (bench/), with headroom.
-BYTES_PER_BOX_TET = 160
+#: Peak bytes per lattice tet of the box around the solid: 112-156 measured on xyz_cube (box-filling)
+#: at diag/160 and /80, plus headroom.
+BYTES_PER_BOX_TET = 200
 #: Deepest frame allowed: row and cell indices must fit the 21-bit fields of the crossing keys.
 MAX_FRAME_LEVELS = MAX_LEVEL - 1
 
