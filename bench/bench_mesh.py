@@ -34,7 +34,7 @@ def main(argv=None) -> int:
     if not files:
         print(f"no surfaces in {args.folder}", file=sys.stderr)
         return 2
-    paroct.mesh(ROOT / "data" / "xyz_cube.stl", divisions=10)  # compile or load the numba cache
+    _warm_up()
     check_mesh = None
     if not args.no_hausdorff:
         try:
@@ -77,6 +77,16 @@ def main(argv=None) -> int:
               f" (whole mesh() call, 1 process, numba threads = {paroct_threads()})")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
     return 0
+
+
+def _warm_up() -> None:
+    """Compile (or load from the numba cache) every kernel, including pinch repair and the thin-feature
+    diagnosis, which only run on parts that need them: a block with a fin thinner than the size."""
+    import manifold3d
+
+    paroct.mesh(ROOT / "data" / "xyz_cube.stl", divisions=10)
+    fin = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + manifold3d.Manifold.cube([1.0, 0.03, 0.5]).translate([0, 0, 0.5])
+    paroct.mesh(fin, size=0.1)
 
 
 def paroct_threads() -> int:
