@@ -151,3 +151,27 @@ def test_prism_table_tets_are_valid_for_a_convex_prism():
             continue
         vols = [np.linalg.det(prism[t[1:]] - prism[t[0]]) / 6 for t in table]
         assert np.isclose(sum(abs(v) for v in vols), 0.5) and min(abs(v) for v in vols) > 0
+
+
+@pytest.mark.parametrize("ext", [".obj", ".off", ".ply", ".stl"])
+def test_surface_formats_load_the_same_solid(tmp_path, ext):
+    import meshio
+
+    ref = load_surface(DATA / "angle_block.stl")
+    path = tmp_path / f"part{ext}"
+    meshio.write(path, meshio.Mesh(ref.vertices, [("triangle", ref.faces)]), **({"binary": True} if ext == ".stl" else {}))
+    surface = load_surface(path)
+    assert surface.volume == pytest.approx(ref.volume, rel=1e-6)
+    assert surface.genus == ref.genus and surface.faces.shape == ref.faces.shape
+
+
+def test_quads_are_split_into_triangles(tmp_path):
+    import meshio
+
+    box = manifold3d.Manifold.cube([1.0, 2.0, 3.0])
+    # A unit-cell cube as 6 quads in an OBJ file.
+    v = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float) * [1, 2, 3]
+    quads = np.array([[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]])
+    meshio.write(tmp_path / "box.obj", meshio.Mesh(v, [("quad", quads)]))
+    surface = load_surface(tmp_path / "box.obj")
+    assert surface.volume == pytest.approx(box.volume()) and surface.faces.shape == (12, 3)
