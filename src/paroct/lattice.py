@@ -14,6 +14,9 @@ from .frame import CUBE_CORNERS, FREUDENTHAL_TETS
 from .octant import morton_key
 
 _EMPTY = np.int64(-1)
+#: Number leaf corners through a dense box index when the box has at most this many
+#: lattice points per leaf (12 bytes each), else through a hash table.
+DENSE_SLOTS_PER_LEAF = 8
 _FIB = np.uint64(0x9E3779B97F4A7C15)
 
 
@@ -27,10 +30,9 @@ def _slot(key, bits):
 
 
 @nb.njit(cache=True)
-def _insert(table_keys, table_vals, bits, key, next_id):
-    """Open-addressing insert; returns (id of key, whether it was new)."""
-    mask = (np.int64(1) << bits) - 1
-    s = _slot(key, bits)
+def _insert(table_keys, table_vals, mask, key, slot, next_id):
+    """Open-addressing insert from a first slot; returns (id of key, whether it was new)."""
+    s = slot
     while True:
         k = table_keys[s]
         if k == key:
@@ -43,14 +45,26 @@ def _insert(table_keys, table_vals, bits, key, next_id):
 
 
 @nb.njit(cache=True)
-def _number_corners(anchors, sides):
-    """Vertex ids (L, 8) int32 of leaf corners and the lattice coordinates (V, 3) of the vertices."""
+def _number_corners(anchors, sides, box_lo, box_dims):
+    """Vertex ids (L, 8) int32 of leaf corners and the lattice coordinates (V, 3) of the vertices.
+
+    box_dims[0] > 0: every corner lies in the box box_lo + [0, box_dims), and its linear index
+    there is a collision-free slot; otherwise slots come from _slot and the table grows.
+    """
     n = anchors.shape[0]
-    bits = 4
-    while (np.int64(1) << bits) < 4 * n + 16:
-        bits += 1
-    table_keys = np.full(np.int64(1) << bits, _EMPTY, dtype=np.int64)
-    table_vals = np.empty(np.int64(1) << bits, dtype=np.int32)
+    dense = box_dims[0] > 0
+    if dense:
+        size = box_dims[0] * box_dims[1] * box_dims[2]
+        bits = 0
+        mask = np.int64(-1)
+    else:
+        bits = 4
+        while (np.int64(1) << bits) < 4 * n + 16:
+            bits += 1
+        size = np.int64(1) << bits
+        mask = size - 1
+    table_keys = np.full(size, _EMPTY, dtype=np.int64)
+    table_vals = np.empty(size, dtype=np.int32)
     corner_ids = np.empty((n, 8), dtype=np.int32)
     coords = np.empty((4 * n + 16, 3), dtype=np.int64)
     count = 0
@@ -59,7 +73,12 @@ def _number_corners(anchors, sides):
             x = anchors[i, 0] + sides[i] * CUBE_CORNERS[c, 0]
             y = anchors[i, 1] + sides[i] * CUBE_CORNERS[c, 1]
             z = anchors[i, 2] + sides[i] * CUBE_CORNERS[c, 2]
-            vid, new = _insert(table_keys, table_vals, bits, morton_key(x, y, z), count)
+            key = morton_key(x, y, z)
+            if dense:
+                slot = (x - box_lo[0]) + box_dims[0] * ((y - box_lo[1]) + box_dims[1] * (z - box_lo[2]))
+            else:
+                slot = _slot(key, bits)
+            vid, new = _insert(table_keys, table_vals, mask, key, slot, count)
             if new:
                 if count == coords.shape[0]:
                     grown = np.empty((2 * count, 3), dtype=np.int64)
@@ -69,8 +88,9 @@ def _number_corners(anchors, sides):
                 coords[count, 1] = y
                 coords[count, 2] = z
                 count += 1
-                if 2 * count > table_keys.shape[0]:
+                if not dense and 2 * count > table_keys.shape[0]:
                     table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
+                    mask = (np.int64(1) << bits) - 1
             corner_ids[i, c] = vid
     return corner_ids, coords[:count].copy()
 
@@ -80,9 +100,10 @@ def _rehash(table_keys, table_vals, bits):
     new_bits = bits + 1
     new_keys = np.full(np.int64(1) << new_bits, _EMPTY, dtype=np.int64)
     new_vals = np.empty(np.int64(1) << new_bits, dtype=np.int32)
+    mask = (np.int64(1) << new_bits) - 1
     for s in range(table_keys.shape[0]):
         if table_keys[s] != _EMPTY:
-            _insert(new_keys, new_vals, new_bits, table_keys[s], table_vals[s])
+            _insert(new_keys, new_vals, mask, table_keys[s], _slot(table_keys[s], new_bits), table_vals[s])
     return new_keys, new_vals, new_bits
 
 
@@ -108,7 +129,14 @@ def number_corners(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, 
     sides = np.ascontiguousarray(sides, dtype=np.int64)
     if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
         raise ValueError(f"anchors.shape = {anchors.shape}, sides.shape = {sides.shape}; expected (L, 3) and (L,)")
-    return _number_corners(anchors, sides)
+    box_lo = np.zeros(3, dtype=np.int64)
+    box_dims = np.zeros(3, dtype=np.int64)
+    if anchors.shape[0]:
+        box_lo = anchors.min(axis=0)
+        box_dims = (anchors + sides[:, None]).max(axis=0) + 1 - box_lo
+        if np.prod(box_dims.astype(np.float64)) > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
+            box_dims = np.zeros(3, dtype=np.int64)
+    return _number_corners(anchors, sides, box_lo, box_dims)
 
 
 def freudenthal_tets(corner_ids: np.ndarray) -> np.ndarray:
