@@ -107,14 +107,34 @@ def _rehash(table_keys, table_vals, bits):
     return new_keys, new_vals, new_bits
 
 
-@nb.njit(cache=True)
-def _freudenthal_tets(corner_ids):
+@nb.njit(cache=True, inline="always")
+def _tet_kept(corner_ids, i, t, marked):
+    for k in range(4):
+        if marked[corner_ids[i, FREUDENTHAL_TETS[t, k]]]:
+            return True
+    return False
+
+
+@nb.njit(cache=True, parallel=True)
+def _freudenthal_tets(corner_ids, marked):
+    """Freudenthal tets of the leaves with at least one marked vertex (count, prefix sum, fill)."""
     n = corner_ids.shape[0]
-    tets = np.empty((6 * n, 4), dtype=np.int32)
-    for i in range(n):
+    counts = np.zeros(n + 1, dtype=np.int64)
+    for i in nb.prange(n):
+        c = 0
         for t in range(6):
-            for k in range(4):
-                tets[6 * i + t, k] = corner_ids[i, FREUDENTHAL_TETS[t, k]]
+            if _tet_kept(corner_ids, i, t, marked):
+                c += 1
+        counts[i + 1] = c
+    offsets = np.cumsum(counts)
+    tets = np.empty((offsets[n], 4), dtype=np.int32)
+    for i in nb.prange(n):
+        k = offsets[i]
+        for t in range(6):
+            if _tet_kept(corner_ids, i, t, marked):
+                for j in range(4):
+                    tets[k, j] = corner_ids[i, FREUDENTHAL_TETS[t, j]]
+                k += 1
     return tets
 
 
@@ -139,9 +159,13 @@ def number_corners(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, 
     return _number_corners(anchors, sides, box_lo, box_dims)
 
 
-def freudenthal_tets(corner_ids: np.ndarray) -> np.ndarray:
-    """The six positively oriented Freudenthal tets (6L, 4) int32 of leaves with corner_ids (L, 8)."""
-    return _freudenthal_tets(np.ascontiguousarray(corner_ids))
+def freudenthal_tets(corner_ids: np.ndarray, marked: np.ndarray | None = None) -> np.ndarray:
+    """The positively oriented Freudenthal tets (int32, 4 columns) of leaves with corner_ids (L, 8):
+    all six per leaf, in leaf order, or with ``marked`` (V,) bool only those with a marked vertex."""
+    corner_ids = np.ascontiguousarray(corner_ids)
+    if marked is None:
+        marked = np.ones(int(corner_ids.max(initial=-1)) + 1, dtype=np.bool_)
+    return _freudenthal_tets(corner_ids, np.ascontiguousarray(marked, dtype=np.bool_))
 
 
 def leaf_tets(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

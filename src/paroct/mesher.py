@@ -180,9 +180,7 @@ def mesh(
     inside = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords) > 0
     stages.done("classify")
 
-    # Leaves with no inside corner hold only outside tets.
-    tets = freudenthal_tets(corner_ids[inside[corner_ids].any(axis=1)])
-    tets = tets[inside[tets].any(axis=1)]
+    tets = freudenthal_tets(corner_ids, inside)  # tets with no inside vertex stay outside
     stages.done("emit")
 
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report)
