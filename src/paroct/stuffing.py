@@ -395,10 +395,13 @@ def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touche
 
 
 @nb.njit(cache=True, parallel=True)
-def _orient(points, tets):
-    """Swap two vertices of every tet of negative volume; returns the number of zero-volume tets."""
+def _orient(points, tets, touched):
+    """Swap two vertices of every touched tet of negative volume; returns the number of zero-volume tets.
+    (Untouched lattice tets are positive by construction.)"""
     flat = 0
     for t in nb.prange(tets.shape[0]):
+        if not touched[t]:
+            continue
         p0 = points[tets[t, 0]]
         a = points[tets[t, 1]] - p0
         b = points[tets[t, 2]] - p0
@@ -428,16 +431,13 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     points[:n_lattice][warped] = cuts.points[targets[warped]]
     signs = np.where(inside, 1, -1).astype(np.int8)
     signs[warped] = 0
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
-    table_a, table_b, table_edge, bits = cuts.table
+    tets = np.ascontiguousarray(tets)
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
     np.cumsum(_stencil_counts(tets, signs), out=offsets[1:])
     out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
     touched = np.empty(out.shape[0], dtype=np.bool_)
     _stencils(tets, signs, coords, cuts.table, n_lattice, PRISM_TETS, offsets, out, touched)
-    sub = np.ascontiguousarray(out[touched])
-    flat = _orient(points, sub)  # untouched lattice tets are positive by construction
-    out[touched] = sub
+    flat = _orient(points, out, touched)
     if flat:
         raise AssertionError(f"stuffing produced {flat} flat tets")
     return points, out
