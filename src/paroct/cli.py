@@ -121,6 +121,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
     def progress(stage: str) -> None:
         _err(f"{stage} done")
 
+    if not args.quiet and not _kernels_cached():
+        _err("compiling the numba kernels on this first run (about 20 s on 2 cores; cached afterwards)")
     t0 = time.perf_counter()
     result = mesh(source, args.size, divisions=args.divisions, max_memory=max_memory,
                   progress=progress if args.verbose else None)
@@ -153,6 +155,15 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
         lines.append(f"  {'write':<10} {write_seconds:8.3f} s")
     lines.append(f"time {mesh_seconds + write_seconds:.3f} s")
     return "\n".join(lines)
+
+
+def _kernels_cached() -> bool:
+    """Whether numba's on-disk cache holds the stuffing kernels (the last stage to compile)."""
+    import os
+
+    cache_dir = os.environ.get("NUMBA_CACHE_DIR")
+    folder = Path(cache_dir) if cache_dir else Path(__file__).resolve().parent / "__pycache__"
+    return folder.is_dir() and any(folder.rglob("stuffing*.nbi"))
 
 
 def _run_check(args: argparse.Namespace) -> int:

@@ -6,7 +6,6 @@ and turns their findings into the report.
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
 from typing import Callable

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .frame import EDGE_DIRECTIONS, FatFrame, row_basis
+from .frame import FatFrame, row_basis
 
 #: Snapped coordinates, and their images under the row bases, stay below 2**(COORD_BITS + 1)
 #: in magnitude; orientations then fit in int64 and positions in the 128-bit helper.

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .frame import EDGE_DIRECTIONS, EDGE_IS_LONG
+from .frame import EDGE_IS_LONG
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
