@@ -22,7 +22,7 @@ from .octant import MAX_LEVEL
 from .octree import octant_lattice_anchors, refine_to_level, touched_cells, uniform_leaves
 from .quality import tet_quality
 from .repair import remove_pinches
-from .stuffing import CutEdges, _collect_cut_edges, mixed_tets, stuff, warp_targets
+from .stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
@@ -197,6 +197,11 @@ def mesh(
     _measure(points, out_tets, core, faces_out, report)
     points, out_tets = _compact(points, out_tets)
     stages.done("quality")
+    if report.unresolved_cuts:
+        report.warnings.append(
+            f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
+            "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
+        )
     lost = _losses(report)
     if lost:
         for d in range(EDGE_DIRECTIONS.shape[0]):
@@ -264,7 +269,7 @@ def solid_leaves(frame: FatFrame, snapped, faces, x_crossings: rays.RowCrossings
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
     """Cut points of every lattice edge of the tets whose ends differ in class."""
     mixed = np.ascontiguousarray(tets[mixed_tets(tets, inside)])
-    starts, ends, dirs, *table = _collect_cut_edges(mixed, inside, coords)
+    starts, ends, dirs, *table = collect_cut_edges(mixed, inside, coords)
     fracs = np.empty(starts.shape[0])
     for d in range(EDGE_DIRECTIONS.shape[0]):
         sel = np.nonzero(dirs == d)[0]

@@ -72,7 +72,7 @@ def mixed_tets(tets, inside):
 
 
 @nb.njit(cache=True)
-def _collect_cut_edges(tets, inside, coords):
+def collect_cut_edges(tets, inside, coords):
     """Unique lattice edges of tets whose ends differ in class.
 
     Returns (starts (E,) vertex ids, ends (E,), directions (E,) index into EDGE_DIRECTIONS,
