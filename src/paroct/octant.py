@@ -97,13 +97,6 @@ def octant_overlaps(key_a, level_a, key_b, level_b):
     return (key_a >> shift) == (key_b >> shift)
 
 
-@nb.njit(cache=True, inline="always")
-def octant_is_inside_root(x, y, z):
-    """True iff the anchor (x, y, z) lies in the root cube [0, 2**MAX_LEVEL)^3."""
-    n = np.int64(1) << MAX_LEVEL
-    return 0 <= x < n and 0 <= y < n and 0 <= z < n
-
-
 @nb.njit(cache=True)
 def morton_keys(coords):
     """Morton keys (N,) int64 of integer coordinates (N, 3)."""

@@ -150,42 +150,35 @@ def _pack(r2, r3, j):
 
 
 @nb.njit(cache=True, parallel=True)
-def _count_hits(tri_coords, unit_bits):
-    n = tri_coords.shape[0]
-    counts = np.zeros(n, dtype=np.int64)
-    for f in nb.prange(n):
-        tri = tri_coords[f]
-        r2a, r2b, unit = _row_range(min(tri[0, 1], tri[1, 1], tri[2, 1]), max(tri[0, 1], tri[1, 1], tri[2, 1]), unit_bits)
-        r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
-        c = 0
-        for r2 in range(r2a, r2b + 1):
-            for r3 in range(r3a, r3b + 1):
-                hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
-                if hit:
-                    c += 1
-        counts[f] = c
-    return counts
+def _row_hits(tri_coords, unit_bits, offsets, keys, fracs, signs, faces, counts):
+    """Crossings of every triangle with the rows its projection covers.
 
-
-@nb.njit(cache=True, parallel=True)
-def _fill_hits(tri_coords, unit_bits, offsets, keys, fracs, signs, faces):
+    Two passes over the same loop: with ``counts`` (len F) it only counts each triangle's hits;
+    otherwise it writes them from offsets[f] on (count, prefix sum, fill: each thread owns its
+    triangles' slots).
+    """
+    counting = counts.shape[0] > 0
     n = tri_coords.shape[0]
     for f in nb.prange(n):
         tri = tri_coords[f]
         r2a, r2b, unit = _row_range(min(tri[0, 1], tri[1, 1], tri[2, 1]), max(tri[0, 1], tri[1, 1], tri[2, 1]), unit_bits)
         r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
-        k = offsets[f]
+        k = 0 if counting else offsets[f]
         for r2 in range(r2a, r2b + 1):
             for r3 in range(r3a, r3b + 1):
                 hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
-                if hit:
+                if not hit:
+                    continue
+                if not counting:
                     j, frac = _cell_of(tri, t, wa, wb, wc, dd, unit_bits)
                     keys[k] = _pack(r2, r3, j)
                     fracs[k] = frac
                     # Projection orientation +1 means the normal points along +d: the row leaves the solid.
                     signs[k] = -s
                     faces[k] = f
-                    k += 1
+                k += 1
+        if counting:
+            counts[f] = k
 
 
 @dataclass(frozen=True)
@@ -210,7 +203,9 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     coords = snapped @ T.T
     tri_coords = np.ascontiguousarray(coords[faces])
     bits = snap_bits(frame)
-    counts = _count_hits(tri_coords, bits)
+    counts = np.zeros(tri_coords.shape[0], dtype=np.int64)
+    none_i8, none_i32 = np.empty(0, dtype=np.int8), np.empty(0, dtype=np.int32)
+    _row_hits(tri_coords, bits, counts, counts, np.empty(0), none_i8, none_i32, counts)
     offsets = np.zeros(counts.shape[0] + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])
@@ -218,7 +213,7 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     fracs = np.empty(total, dtype=np.float64)
     signs = np.empty(total, dtype=np.int8)
     hit_faces = np.empty(total, dtype=np.int32)
-    _fill_hits(tri_coords, bits, offsets, keys, fracs, signs, hit_faces)
+    _row_hits(tri_coords, bits, offsets, keys, fracs, signs, hit_faces, np.empty(0, dtype=np.int64))
     order = np.lexsort((hit_faces, fracs, keys))
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces[order])
 

@@ -262,43 +262,9 @@ def _emit(out, k, v0, v1, v2, v3):
     return k + 1
 
 
-@nb.njit(cache=True, parallel=True)
-def _stencil_counts(tets, signs):
-    """Number of output tets (0..3) of every lattice tet, from its sign pattern alone."""
-    n = tets.shape[0]
-    counts = np.empty(n, dtype=np.int64)
-    for t in nb.prange(n):
-        n_p = 0
-        n_z = 0
-        n_m = 0
-        for i in range(4):
-            s = signs[tets[t, i]]
-            if s > 0:
-                n_p += 1
-            elif s < 0:
-                n_m += 1
-            else:
-                n_z += 1
-        if n_p == 0:
-            counts[t] = 0
-        elif n_m == 0 or n_p == 1:
-            counts[t] = 1
-        elif n_p == 2 and n_z == 1:
-            counts[t] = 2
-        else:
-            counts[t] = 3
-    return counts
-
-
-@nb.njit(cache=True)
-def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch):
-    """Write the stencil tets of lattice tet t from out[k] on; returns whether the lattice tet
-    was cut or warped (False: it is copied untouched)."""
-    table_a, table_b, table_edge, bits = table
-    plus = scratch[0]
-    zero = scratch[1]
-    minus = scratch[2]
-    pv = scratch[3]
+@nb.njit(cache=True, inline="always")
+def _sign_pattern(tets, t, signs, plus, zero, minus):
+    """Split tet t's vertices by sign into plus, zero, minus; returns their counts (n_p, n_z, n_m)."""
     n_p = 0
     n_z = 0
     n_m = 0
@@ -313,6 +279,45 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
         else:
             zero[n_z] = v
             n_z += 1
+    return n_p, n_z, n_m
+
+
+@nb.njit(cache=True, inline="always")
+def _stencil_size(n_p, n_z, n_m):
+    """Number of tets the stencil of a sign pattern emits (see _stencil_tet)."""
+    if n_p == 0:
+        return 0
+    if n_m == 0 or n_p == 1:
+        return 1
+    if n_p == 2 and n_z == 1:
+        return 2
+    return 3  # the prisms: ++-- and +++-
+
+
+@nb.njit(cache=True, parallel=True)
+def _stencil_counts(tets, signs):
+    """Number of output tets of every lattice tet, from its sign pattern alone."""
+    n = tets.shape[0]
+    counts = np.empty(n, dtype=np.int64)
+    n_chunks = min(n, 256)
+    for chunk in nb.prange(n_chunks):
+        scratch = np.empty((3, 4), dtype=np.int64)
+        for t in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            n_p, n_z, n_m = _sign_pattern(tets, t, signs, scratch[0], scratch[1], scratch[2])
+            counts[t] = _stencil_size(n_p, n_z, n_m)
+    return counts
+
+
+@nb.njit(cache=True)
+def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch):
+    """Write the stencil tets of lattice tet t from out[k] on; returns whether the lattice tet
+    was cut or warped (False: it is copied untouched)."""
+    table_a, table_b, table_edge, bits = table
+    plus = scratch[0]
+    zero = scratch[1]
+    minus = scratch[2]
+    pv = scratch[3]
+    n_p, n_z, n_m = _sign_pattern(tets, t, signs, plus, zero, minus)
     if n_p == 0:
         return True
     if n_m == 0:
