@@ -24,41 +24,14 @@ import numba as nb
 import numpy as np
 
 from .frame import EDGE_IS_LONG
+from .topology import pair_slot, pair_table
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
 
 _EDGE_PAIRS = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
-_FIB = np.uint64(0x9E3779B97F4A7C15)
 #: Direction index of a positive edge vector by its sign bits (x | y << 1 | z << 2); -1: not an edge.
 _DIRECTION_OF_BITS = np.array([-1, 0, 1, 3, 2, 4, 5, 6], dtype=np.int64)
-
-
-@nb.njit(cache=True, inline="always")
-def _hash2(a, b, bits):
-    h = (np.uint64(a) * _FIB) ^ np.uint64(b)
-    return np.int64((h * _FIB) >> np.uint64(64 - bits))
-
-
-@nb.njit(cache=True)
-def _edge_table(n_expected):
-    bits = 4
-    while (np.int64(1) << bits) < 2 * n_expected + 16:
-        bits += 1
-    return np.full(np.int64(1) << bits, -1, dtype=np.int64), np.empty(np.int64(1) << bits, dtype=np.int64), bits
-
-
-@nb.njit(cache=True)
-def _lookup(table_a, table_b, bits, a, b):
-    """Slot of edge (a, b), a < b, in the table; -1 - slot of the empty slot where it would go."""
-    mask = (np.int64(1) << bits) - 1
-    s = _hash2(a, b, bits)
-    while True:
-        if table_a[s] == -1:
-            return -1 - s
-        if table_a[s] == a and table_b[s] == b:
-            return s
-        s = (s + 1) & mask
 
 
 @nb.njit(cache=True, parallel=True)
@@ -79,7 +52,7 @@ def collect_cut_edges(tets, inside, coords):
     slot table for lookup: table_a, table_b, table_edge, bits); end - start = side * direction.
     """
     m = tets.shape[0]
-    table_a, table_b, bits = _edge_table(m)
+    table_a, table_b, bits = pair_table(m)
     table_edge = np.full(table_a.shape[0], -1, dtype=np.int64)
     starts = np.empty(m + 16, dtype=np.int64)
     ends = np.empty(m + 16, dtype=np.int64)
@@ -93,7 +66,7 @@ def collect_cut_edges(tets, inside, coords):
                 continue
             a = min(p, q)
             b = max(p, q)
-            s = _lookup(table_a, table_b, bits, a, b)
+            s = pair_slot(table_a, table_b, bits, a, b)
             if s >= 0:
                 continue
             s = -1 - s
@@ -249,7 +222,7 @@ def _quad_first_diagonal(coords, a, b, e):
 def _cut_id(table_a, table_b, table_edge, bits, n_lattice, p, q):
     a = min(p, q)
     b = max(p, q)
-    s = _lookup(table_a, table_b, bits, a, b)
+    s = pair_slot(table_a, table_b, bits, a, b)
     return n_lattice + table_edge[s]
 
 

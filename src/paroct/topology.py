@@ -37,6 +37,28 @@ def _hash3(a, b, c, bits):
 
 
 @nb.njit(cache=True)
+def pair_table(n_expected):
+    """An empty open-addressing table for up to n_expected vertex pairs: (keys a, keys b, bits)."""
+    bits = 4
+    while (np.int64(1) << bits) < 2 * n_expected + 16:
+        bits += 1
+    return np.full(np.int64(1) << bits, -1, dtype=np.int64), np.empty(np.int64(1) << bits, dtype=np.int64), bits
+
+
+@nb.njit(cache=True)
+def pair_slot(table_a, table_b, bits, a, b):
+    """Slot of the pair (a, b), a < b, in a pair_table; -1 - slot of the empty slot where it would go."""
+    mask = (np.int64(1) << bits) - 1
+    s = _hash3(a, b, 0, bits)
+    while True:
+        if table_a[s] == -1:
+            return -1 - s
+        if table_a[s] == a and table_b[s] == b:
+            return s
+        s = (s + 1) & mask
+
+
+@nb.njit(cache=True)
 def match_faces(tets):
     """Neighbour across every tet face.
 
@@ -103,15 +125,10 @@ def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
 
 @nb.njit(cache=True)
 def _surface_edges(faces, n_vertices):
-    """Per directed half-edge of faces: partner count checks and vertex link counts."""
+    """Number of edges of a triangle surface, and of edges not in exactly two faces of opposite orientation."""
     nf = faces.shape[0]
-    bits = 4
-    while (np.int64(1) << bits) < 6 * nf + 16:
-        bits += 1
-    size = np.int64(1) << bits
-    mask = size - 1
-    ka = np.full(size, -1, dtype=np.int64)
-    kb = np.empty(size, dtype=np.int64)
+    ka, kb, bits = pair_table(3 * nf)
+    size = ka.shape[0]
     count = np.zeros(size, dtype=np.int64)
     fwd = np.zeros(size, dtype=np.int64)
     for f in range(nf):
@@ -120,15 +137,11 @@ def _surface_edges(faces, n_vertices):
             q = faces[f, (j + 1) % 3]
             a = min(p, q)
             b = max(p, q)
-            s = _hash3(a, b, 0, bits)
-            while True:
-                if ka[s] == -1:
-                    ka[s] = a
-                    kb[s] = b
-                    break
-                if ka[s] == a and kb[s] == b:
-                    break
-                s = (s + 1) & mask
+            s = pair_slot(ka, kb, bits, a, b)
+            if s < 0:
+                s = -1 - s
+                ka[s] = a
+                kb[s] = b
             count[s] += 1
             if p < q:
                 fwd[s] += 1
