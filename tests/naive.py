@@ -116,3 +116,39 @@ def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.n
     if u >= 0 and v >= 0 and u + v <= 1:
         candidates.append(a + u * (b - a) + v * (c - a))
     return min(float(np.linalg.norm(p - q)) for q in candidates)
+
+
+def triangle_meets_cube(tri: np.ndarray, lo: np.ndarray, side: float) -> bool:
+    """Clip the triangle by the cube's six half-spaces (Sutherland-Hodgman); it meets the closed
+    cube iff something is left."""
+    poly = [np.asarray(p, dtype=float) for p in tri]
+    for axis in range(3):
+        for bound, keep_below in ((lo[axis], False), (lo[axis] + side, True)):
+            out = []
+            for i in range(len(poly)):
+                p, q = poly[i], poly[(i + 1) % len(poly)]
+                p_in = p[axis] <= bound if keep_below else p[axis] >= bound
+                q_in = q[axis] <= bound if keep_below else q[axis] >= bound
+                if p_in:
+                    out.append(p)
+                if p_in != q_in:
+                    t = (bound - p[axis]) / (q[axis] - p[axis])
+                    out.append(p + t * (q - p))
+            poly = out
+            if not poly:
+                return False
+    return True
+
+
+def cells_meeting_triangles(tris: np.ndarray, side: float, n_cells: int) -> set[tuple[int, int, int]]:
+    """All cells (i, j, k) of the grid of ``side`` in [0, n_cells)^3 that meet a triangle, by clipping."""
+    out = set()
+    for tri in tris:
+        lo = np.maximum(np.floor(tri.min(axis=0) / side).astype(int) - 1, 0)
+        hi = np.minimum(np.floor(tri.max(axis=0) / side).astype(int) + 1, n_cells - 1)
+        for i in range(lo[0], hi[0] + 1):
+            for j in range(lo[1], hi[1] + 1):
+                for k in range(lo[2], hi[2] + 1):
+                    if triangle_meets_cube(tri, np.array([i, j, k]) * side, side):
+                        out.add((i, j, k))
+    return out

@@ -7,11 +7,22 @@ deterministic and spatially coherent.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba as nb
 import numpy as np
 
-from .frame import CUBE_CORNERS, FREUDENTHAL_TETS
+from .frame import CUBE_CORNERS
 from .octant import morton_key
+from .transitions import (
+    CHAIN_IS_ODD,
+    CHAIN_SPLITS,
+    CHAINS,
+    FACE_EDGES,
+    SPLIT_POINT_OFFSETS,
+    TEMPLATE_COUNTS,
+    TEMPLATE_TETS,
+)
 
 _EMPTY = np.int64(-1)
 #: Number leaf corners through a dense box index when the box has at most this many
@@ -44,12 +55,36 @@ def _insert(table_keys, table_vals, mask, key, slot, next_id):
         s = (s + 1) & mask
 
 
-@nb.njit(cache=True)
-def _number_corners(anchors, sides, box_lo, box_dims):
-    """Vertex ids (L, 8) int32 of leaf corners and the lattice coordinates (V, 3) of the vertices.
+@nb.njit(cache=True, inline="always")
+def _first_slot(x, y, z, key, dense, box_lo, box_dims, bits):
+    if dense:
+        return (x - box_lo[0]) + box_dims[0] * ((y - box_lo[1]) + box_dims[1] * (z - box_lo[2]))
+    return _slot(key, bits)
 
-    box_dims[0] > 0: every corner lies in the box box_lo + [0, box_dims), and its linear index
-    there is a collision-free slot; otherwise slots come from _slot and the table grows.
+
+@nb.njit(cache=True)
+def _find(table_keys, table_vals, mask, key, slot):
+    """Id of key in the open-addressing table, or -1."""
+    s = slot
+    while True:
+        k = table_keys[s]
+        if k == key:
+            return table_vals[s]
+        if k == _EMPTY:
+            return -1
+        s = (s + 1) & mask
+
+
+@nb.njit(cache=True)
+def _number_vertices(anchors, sides, box_lo, box_dims, split_offsets, face_edges):
+    """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
+    (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
+    lattice coordinates (V, 3) of the vertices.
+
+    Corners are numbered first, in leaf order; then, for each coarse leaf in order, the
+    centres of its faces with a split cube edge (the eager face-centre rule).
+    box_dims[0] > 0: every vertex lies in the box box_lo + [0, box_dims), and its linear
+    index there is a collision-free slot; otherwise slots come from _slot and the table grows.
     """
     n = anchors.shape[0]
     dense = box_dims[0] > 0
@@ -74,16 +109,10 @@ def _number_corners(anchors, sides, box_lo, box_dims):
             y = anchors[i, 1] + sides[i] * CUBE_CORNERS[c, 1]
             z = anchors[i, 2] + sides[i] * CUBE_CORNERS[c, 2]
             key = morton_key(x, y, z)
-            if dense:
-                slot = (x - box_lo[0]) + box_dims[0] * ((y - box_lo[1]) + box_dims[1] * (z - box_lo[2]))
-            else:
-                slot = _slot(key, bits)
-            vid, new = _insert(table_keys, table_vals, mask, key, slot, count)
+            vid, new = _insert(table_keys, table_vals, mask, key, _first_slot(x, y, z, key, dense, box_lo, box_dims, bits), count)
             if new:
                 if count == coords.shape[0]:
-                    grown = np.empty((2 * count, 3), dtype=np.int64)
-                    grown[:count] = coords
-                    coords = grown
+                    coords = _grow(coords, count)
                 coords[count, 0] = x
                 coords[count, 1] = y
                 coords[count, 2] = z
@@ -92,7 +121,52 @@ def _number_corners(anchors, sides, box_lo, box_dims):
                     table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
                     mask = (np.int64(1) << bits) - 1
             corner_ids[i, c] = vid
-    return corner_ids, coords[:count].copy()
+    split_row = np.full(n, -1, dtype=np.int64)
+    n_coarse = 0
+    for i in range(n):
+        if sides[i] >= 2:
+            split_row[i] = n_coarse
+            n_coarse += 1
+    split_ids = np.full((n_coarse, 18), -1, dtype=np.int32)
+    for i in range(n):
+        r = split_row[i]
+        if r < 0:
+            continue
+        half = sides[i] // 2
+        for p in range(18):
+            x = anchors[i, 0] + half * split_offsets[p, 0]
+            y = anchors[i, 1] + half * split_offsets[p, 1]
+            z = anchors[i, 2] + half * split_offsets[p, 2]
+            key = morton_key(x, y, z)
+            slot = _first_slot(x, y, z, key, dense, box_lo, box_dims, bits)
+            if p < 12:
+                split_ids[r, p] = _find(table_keys, table_vals, mask, key, slot)
+                continue
+            split = False
+            for e in face_edges[p - 12]:
+                split |= split_ids[r, e] >= 0
+            if not split:
+                continue
+            vid, new = _insert(table_keys, table_vals, mask, key, slot, count)
+            if new:
+                if count == coords.shape[0]:
+                    coords = _grow(coords, count)
+                coords[count, 0] = x
+                coords[count, 1] = y
+                coords[count, 2] = z
+                count += 1
+                if not dense and 2 * count > table_keys.shape[0]:
+                    table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
+                    mask = (np.int64(1) << bits) - 1
+            split_ids[r, p] = vid
+    return corner_ids, split_row, split_ids, coords[:count].copy()
+
+
+@nb.njit(cache=True)
+def _grow(coords, count):
+    grown = np.empty((2 * count, 3), dtype=np.int64)
+    grown[:count] = coords
+    return grown
 
 
 @nb.njit(cache=True)
@@ -108,42 +182,91 @@ def _rehash(table_keys, table_vals, bits):
 
 
 @nb.njit(cache=True, inline="always")
-def _tet_kept(corner_ids, i, t, marked):
+def _chain_template(corner_ids, split_row, split_ids, i, c, chains, chain_splits, labels):
+    """Fill labels (9,) with the vertex ids of chain c of leaf i (v0..v3, m01, m12, m23, m02,
+    m13; -1 where no vertex) and return the chain's split mask."""
     for k in range(4):
-        if marked[corner_ids[i, FREUDENTHAL_TETS[t, k]]]:
+        labels[k] = corner_ids[i, chains[c, k]]
+    mask = 0
+    r = split_row[i]
+    for k in range(5):
+        labels[4 + k] = -1 if r < 0 else split_ids[r, chain_splits[c, k]]
+        if labels[4 + k] >= 0:
+            mask |= 1 << k
+    return mask
+
+
+@nb.njit(cache=True, inline="always")
+def _template_tet_kept(labels, tmpl, marked):
+    for k in range(4):
+        if marked[labels[tmpl[k]]]:
             return True
     return False
 
 
 @nb.njit(cache=True, parallel=True)
-def _freudenthal_tets(corner_ids, marked):
-    """Freudenthal tets of the leaves with at least one marked vertex (count, prefix sum, fill)."""
+def _leaf_tets(corner_ids, split_row, split_ids, marked, chains, chain_odd, chain_splits, tmpl_tets, tmpl_counts):
+    """Tets of every leaf, chain by chain from the transition templates, keeping those with a
+    marked vertex (count, prefix sum, fill); -1 rows mark a mask without template."""
     n = corner_ids.shape[0]
     counts = np.zeros(n + 1, dtype=np.int64)
+    bad = np.zeros(n, dtype=np.bool_)
     for i in nb.prange(n):
-        c = 0
-        for t in range(6):
-            if _tet_kept(corner_ids, i, t, marked):
-                c += 1
-        counts[i + 1] = c
+        labels = np.empty(9, dtype=np.int64)
+        k = 0
+        for c in range(6):
+            mask = _chain_template(corner_ids, split_row, split_ids, i, c, chains, chain_splits, labels)
+            if tmpl_counts[mask] < 0:
+                bad[i] = True
+                continue
+            for t in range(tmpl_counts[mask]):
+                if _template_tet_kept(labels, tmpl_tets[mask, t], marked):
+                    k += 1
+        counts[i + 1] = k
     offsets = np.cumsum(counts)
     tets = np.empty((offsets[n], 4), dtype=np.int32)
     for i in nb.prange(n):
+        labels = np.empty(9, dtype=np.int64)
         k = offsets[i]
-        for t in range(6):
-            if _tet_kept(corner_ids, i, t, marked):
-                for j in range(4):
-                    tets[k, j] = corner_ids[i, FREUDENTHAL_TETS[t, j]]
-                k += 1
-    return tets
+        for c in range(6):
+            mask = _chain_template(corner_ids, split_row, split_ids, i, c, chains, chain_splits, labels)
+            if tmpl_counts[mask] < 0:
+                continue
+            for t in range(tmpl_counts[mask]):
+                tmpl = tmpl_tets[mask, t]
+                if _template_tet_kept(labels, tmpl, marked):
+                    tets[k, 0] = labels[tmpl[0]]
+                    tets[k, 1] = labels[tmpl[2] if chain_odd[c] else tmpl[1]]
+                    tets[k, 2] = labels[tmpl[1] if chain_odd[c] else tmpl[2]]
+                    tets[k, 3] = labels[tmpl[3]]
+                    k += 1
+    return tets, bad
 
 
-def number_corners(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Global vertex ids of leaf corners.
+@dataclass(frozen=True)
+class LeafVertices:
+    """Globally numbered vertices of the leaves of a 2:1-balanced octree.
 
-    anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides.
-    Returns (corner_ids (L, 8) int32, corner c at anchor + side * CUBE_CORNERS[c];
-    vertex_coords (V, 3) int64 lattice units).
+    corner_ids: (L, 8) int32, corner c of leaf i at anchor + side * CUBE_CORNERS[c].
+    split_row: (L,) int64, row of leaf i in split_ids, -1 for leaves of side 1.
+    split_ids: (C, 18) int32, vertex id of each split point (transitions.SPLIT_POINT_OFFSETS),
+    -1 where the point is not a vertex.
+    coords: (V, 3) int64 lattice coordinates of the vertices (finest-level units).
+    """
+
+    corner_ids: np.ndarray
+    split_row: np.ndarray
+    split_ids: np.ndarray
+    coords: np.ndarray
+
+
+def number_vertices(anchors: np.ndarray, sides: np.ndarray) -> LeafVertices:
+    """Global vertex ids of leaf corners and of the transition points of coarse leaves.
+
+    anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides
+    (powers of two).  The leaves must form a 2:1-balanced linear octree (or part of one),
+    sorted by Morton key: a cube-edge midpoint of a leaf is a vertex iff it is a corner of
+    another leaf, and face centres follow the eager rule (paroct.transitions).
     """
     anchors = np.ascontiguousarray(anchors, dtype=np.int64)
     sides = np.ascontiguousarray(sides, dtype=np.int64)
@@ -156,24 +279,33 @@ def number_corners(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, 
         box_dims = (anchors + sides[:, None]).max(axis=0) + 1 - box_lo
         if np.prod(box_dims.astype(np.float64)) > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
             box_dims = np.zeros(3, dtype=np.int64)
-    return _number_corners(anchors, sides, box_lo, box_dims)
+    return LeafVertices(*_number_vertices(anchors, sides, box_lo, box_dims, SPLIT_POINT_OFFSETS, FACE_EDGES))
 
 
-def freudenthal_tets(corner_ids: np.ndarray, marked: np.ndarray | None = None) -> np.ndarray:
-    """The positively oriented Freudenthal tets (int32, 4 columns) of leaves with corner_ids (L, 8):
-    all six per leaf, in leaf order, or with ``marked`` (V,) bool only those with a marked vertex."""
-    corner_ids = np.ascontiguousarray(corner_ids)
+def graded_tets(vertices: LeafVertices, marked: np.ndarray | None = None) -> np.ndarray:
+    """The positively oriented tets (int32, 4 columns) of the leaves, in leaf order.
+
+    Leaves without split points give their six Freudenthal (fat) tets; the others the
+    transition templates of their chains.  With ``marked`` (V,) bool, only tets with a
+    marked vertex are kept.
+    """
     if marked is None:
-        marked = np.ones(int(corner_ids.max(initial=-1)) + 1, dtype=np.bool_)
-    return _freudenthal_tets(corner_ids, np.ascontiguousarray(marked, dtype=np.bool_))
+        marked = np.ones(vertices.coords.shape[0], dtype=np.bool_)
+    tets, bad = _leaf_tets(vertices.corner_ids, vertices.split_row, vertices.split_ids,
+                           np.ascontiguousarray(marked, dtype=np.bool_), CHAINS, CHAIN_IS_ODD, CHAIN_SPLITS,
+                           TEMPLATE_TETS, TEMPLATE_COUNTS)
+    if bad.any():
+        raise ValueError(f"{int(bad.sum())} leaves have a split pattern without template: the octree is not 2:1 balanced")
+    return tets
 
 
 def leaf_tets(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The six positively oriented Freudenthal tets of every leaf.
+    """All tets of the leaves of a 2:1-balanced octree (six fat tets per leaf without finer
+    neighbours, transition templates otherwise).
 
     anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides.
-    Returns (vertex_coords (V, 3) int64 lattice units, tets (6L, 4) int32), tets 6i..6i+5
-    belonging to leaf i.
+    Returns (vertex_coords (V, 3) int64 lattice units, tets (M, 4) int32).  For leaves of one
+    size, tets 6i..6i+5 belong to leaf i.
     """
-    corner_ids, coords = number_corners(anchors, sides)
-    return coords, freudenthal_tets(corner_ids)
+    vertices = number_vertices(anchors, sides)
+    return vertices.coords, graded_tets(vertices)

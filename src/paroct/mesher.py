@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 import numba as nb
 import numpy as np
@@ -17,20 +17,27 @@ from . import rays
 from .errors import ParoctError
 from .features import ThinFeatures, thin_features
 from .frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
-from .lattice import freudenthal_tets, number_corners
+from .lattice import graded_tets, number_vertices
 from .octant import MAX_LEVEL
-from .octree import octant_lattice_anchors, refine_to_level, touched_cells, uniform_leaves
+from .octree import balance, octant_lattice_anchors, surface_cells, with_ring
 from .quality import tet_quality
 from .repair import remove_pinches
+from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
+#: 3r/R of Todd's fat tet, 3 / sqrt(10).
+FAT_RADIUS_RATIO = 3 / np.sqrt(10)
 #: Default element size as a fraction of the bounding-box diagonal.
 DEFAULT_DIVISIONS = 40
-#: Peak bytes per lattice tet of the box around the solid: 112-156 measured on xyz_cube (box-filling)
-#: at diag/160 and /80, plus headroom.
-BYTES_PER_BOX_TET = 200
+#: Peak bytes per lattice tet: 112-156 measured on xyz_cube (box-filling) at diag/160 and /80, plus headroom.
+BYTES_PER_TET = 200
+#: Thickness of the finest band in units of size, for the memory estimate (cells met by the
+#: surface plus a ring on each side, times the Freudenthal cell's extent).
+BAND_CELLS = 4
+#: Graded interiors hold transition leaves: their tets per max_size^3, against the fat lattice's.
+TRANSITION_FACTOR = 4
 #: Deepest frame allowed: row and cell indices must fit the 21-bit fields of the crossing keys.
 MAX_FRAME_LEVELS = MAX_LEVEL - 1
 
@@ -57,6 +64,12 @@ class MeshReport:
 
     size: float
     levels: int
+    max_size: float = float("nan")
+    n_leaves: int = 0
+    leaf_levels: tuple = ()
+    fat_fraction: float = float("nan")
+    interior_min_dihedral: float = float("nan")
+    interior_max_dihedral: float = float("nan")
     n_tets: int = 0
     n_vertices: int = 0
     min_dihedral: float = float("nan")
@@ -86,10 +99,16 @@ class MeshResult:
     report: MeshReport
 
 
-def estimate_box_tets(surface: Surface, size: float) -> int:
-    """Lattice tets of the uniform frame over the solid's box: 12 per h^3 of box volume."""
-    ext = surface.bbox_max - surface.bbox_min + 2 * size
-    return int(12 * np.prod(ext) / size**3)
+def estimate_tets(surface: Surface, field: SizeField) -> int:
+    """Rough upper estimate of the lattice tets: 12 per h^3 (Freudenthal cells have volume h^3 / 2)
+    in a band of BAND_CELLS * size around the surface, and 12 per max_size^3 times
+    TRANSITION_FACTOR in the rest of the box, never more than the uniform lattice of the box."""
+    h = field.size
+    ext = surface.bbox_max - surface.bbox_min + 2 * h
+    box = float(np.prod(ext))
+    uniform = 12 * box / h**3
+    graded = 12 * surface.area * BAND_CELLS / h**2 + TRANSITION_FACTOR * 12 * box / field.max_size**3
+    return int(min(uniform, graded)) if not field.regions and field.function is None else int(uniform)
 
 
 def _available_memory() -> int:
@@ -134,32 +153,40 @@ def mesh(
     size: float | None = None,
     *,
     divisions: float | None = None,
+    max_size: float | None = None,
+    regions: Sequence[Region] = (),
+    size_function: SizeFunction | None = None,
     max_memory: int | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> MeshResult:
-    """Fill a closed solid with fat-lattice tets, the boundary stuffed onto its surface.
+    """Fill a closed solid with graded fat-lattice tets, the boundary stuffed onto its surface.
 
     source: surface file path (STL, OBJ, OFF, PLY), manifold3d.Manifold, (vertices, faces)
-    or a loaded Surface.  size: long edge of the lattice tets in model units (default:
-    bounding-box diagonal / divisions, divisions default 40).  max_memory: bytes the run may
-    use (default: the machine's available memory); a size that would need more is refused
-    before any work.  progress: called with each stage's name when it ends.
+    or a loaded Surface.  size: finest long edge in model units, used all along the boundary
+    (default: bounding-box diagonal / divisions, divisions default 40).  max_size: largest
+    long edge inside (default 8 * size, rounded down to a power-of-two multiple of size;
+    max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
+    a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
+    evaluated at octant centres (both are clamped to at least size).  max_memory: bytes the
+    run may use (default: the machine's available memory); a size that would need more is
+    refused before any work.  progress: called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
     h = resolve_size(surface, size, divisions)
-    report = MeshReport(size=h, levels=0, solid_volume=surface.volume,
+    field = size_field(h, max_size, regions, size_function)
+    report = MeshReport(size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
                         input_genus=surface.genus, input_components=surface.components)
     report.stage_seconds["load"] = time.perf_counter() - t0
     if progress:
         progress("load")
     stages = _Stages(report, progress)
 
-    box_tets = estimate_box_tets(surface, h)
+    box_tets = estimate_tets(surface, field)
     budget = _available_memory() if max_memory is None else int(max_memory)
-    if box_tets * BYTES_PER_BOX_TET > budget:
+    if box_tets * BYTES_PER_TET > budget:
         raise ParoctError(
-            f"size = {h:.6g} needs about {box_tets:.3g} lattice tets and {box_tets * BYTES_PER_BOX_TET / 2**30:.1f} GiB, "
+            f"size = {h:.6g} needs about {box_tets:.3g} lattice tets and {box_tets * BYTES_PER_TET / 2**30:.1f} GiB, "
             f"more than the {budget / 2**30:.1f} GiB allowed; use a larger size or raise max_memory (--max-memory)"
         )
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
@@ -171,15 +198,17 @@ def mesh(
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-    keys = solid_leaves(frame, snapped, faces, crossings[X_AXIS_DIRECTION], surface)
-    anchors = octant_lattice_anchors(keys, frame)
+    keys, levels = graded_leaves(frame, snapped, faces, crossings[X_AXIS_DIRECTION], surface, field)
+    report.n_leaves = int(keys.shape[0])
+    report.leaf_levels = tuple(int(v) for v in np.unique(frame.levels - levels))
     stages.done("octree")
 
-    corner_ids, coords = number_corners(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)))
+    coords = vertices.coords
     inside = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords) > 0
     stages.done("classify")
 
-    tets = freudenthal_tets(corner_ids, inside)  # tets with no inside vertex stay outside
+    tets = graded_tets(vertices, inside)  # tets with no inside vertex stay outside
     stages.done("emit")
 
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report)
@@ -246,24 +275,29 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
     return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 
-#: Octree levels between the cells sorted into surface / inside / outside and the leaves.
-COARSE_DEPTH = 2
+def graded_leaves(frame: FatFrame, snapped, faces, x_crossings: rays.RowCrossings, surface: Surface,
+                  field: SizeField) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may hold
+    inside tets.
 
-
-def solid_leaves(frame: FatFrame, snapped, faces, x_crossings: rays.RowCrossings, surface: Surface) -> np.ndarray:
-    """Sorted keys of the finest-level leaves that may hold inside tets.
-
-    Cells COARSE_DEPTH levels up that no triangle's bounding box meets lie wholly inside or
-    outside; one winding number at a corner decides, and outside cells are dropped.
+    The finest level covers every cell the surface meets plus one ring of cells around them,
+    so stuffing cuts and warps only fat tets of one size (the Labelle-Shewchuk setting) and no
+    transition leaf touches a warped vertex; elsewhere the size field decides, up to max_size.
+    Leaves the surface does not meet lie wholly inside or outside: the winding number at their
+    anchor decides, and outside leaves are dropped.
     """
-    h = frame.h
-    coarse_level = max(0, frame.levels - COARSE_DEPTH)
-    cells, _ = uniform_leaves(frame, surface.bbox_min - h, surface.bbox_max + h, coarse_level)
-    touched = np.isin(cells, touched_cells(frame, snapped, faces, rays.snap_bits(frame), coarse_level), assume_unique=True)
-    corners = octant_lattice_anchors(cells[~touched], frame)
-    keep = touched.copy()
-    keep[~touched] = rays.winding_numbers(x_crossings, corners) > 0
-    return refine_to_level(cells[keep], coarse_level, frame.levels)
+    finest = frame.levels
+    cut = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
+    band = with_ring(cut, finest)
+    seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field)
+    keys, levels = balance(np.concatenate([band, seed_keys]),
+                           np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
+    meets = np.zeros(keys.shape[0], dtype=bool)
+    fine = np.nonzero(levels == finest)[0]
+    meets[fine] = np.isin(keys[fine], cut, assume_unique=True)
+    keep = meets.copy()
+    keep[~meets] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~meets], frame)) > 0
+    return keys[keep], levels[keep]
 
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
@@ -302,28 +336,24 @@ def _renumber(tets, new_id):
 
 
 def _measure(points, tets, core, faces, report: MeshReport) -> None:
-    """Quality, volume and boundary topology (faces: the boundary).  Core tets (all four vertices
-    core) are untouched lattice tets, so one measured core tet stands for all of them; the band is
-    measured tet by tet."""
-    band = ~core[tets].all(axis=1)
-    band_q = tet_quality(points, tets[band])
-    n_core = int(tets.shape[0] - band.sum())
+    """Quality, volume and boundary topology (faces: the boundary).  Tets with all four vertices
+    core (unwarped inside lattice vertices) are lattice tets the boundary does not touch: their
+    extreme dihedral angles are reported apart (they must stay in [30, 135] degrees)."""
+    q = tet_quality(points, tets)
     report.n_tets = int(tets.shape[0])
     used = np.zeros(points.shape[0], dtype=bool)
     used[tets.ravel()] = True
     report.n_vertices = int(used.sum())
-    mins, maxs, ratios, volume = [band_q.min_dihedral], [band_q.max_dihedral], [band_q.radius_ratio], band_q.volume.sum()
-    if n_core:
-        one = tet_quality(points, tets[~band][:1])
-        mins.append(one.min_dihedral)
-        maxs.append(one.max_dihedral)
-        ratios.append(one.radius_ratio)
-        volume += n_core * one.volume[0]
     if tets.shape[0]:
-        report.min_dihedral = float(min(m.min() for m in mins if m.size))
-        report.max_dihedral = float(max(m.max() for m in maxs if m.size))
-        report.min_radius_ratio = float(min(r.min() for r in ratios if r.size))
-    report.mesh_volume = float(volume)
+        report.min_dihedral = float(q.min_dihedral.min())
+        report.max_dihedral = float(q.max_dihedral.max())
+        report.min_radius_ratio = float(q.radius_ratio.min())
+        report.fat_fraction = float(np.mean(np.abs(q.radius_ratio - FAT_RADIUS_RATIO) < 1e-9))
+        interior = core[tets].all(axis=1)
+        if interior.any():
+            report.interior_min_dihedral = float(q.min_dihedral[interior].min())
+            report.interior_max_dihedral = float(q.max_dihedral[interior].max())
+    report.mesh_volume = float(q.volume.sum())
     topo = surface_topology(faces, points.shape[0])
     report.boundary_genus = topo.genus
     report.boundary_components = topo.components

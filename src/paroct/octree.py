@@ -189,6 +189,124 @@ def touched_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     return np.unique(keys) << (3 * (MAX_LEVEL - frame.levels))
 
 
+@nb.njit(cache=True, inline="always")
+def _axis_separates(ax, ay, az, v0, v1, v2, half):
+    """True iff the axis separates the triangle (vertices relative to the box centre) from the box."""
+    p0 = ax * v0[0] + ay * v0[1] + az * v0[2]
+    p1 = ax * v1[0] + ay * v1[1] + az * v1[2]
+    p2 = ax * v2[0] + ay * v2[1] + az * v2[2]
+    r = half * (abs(ax) + abs(ay) + abs(az))
+    return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
+
+
+@nb.njit(cache=True)
+def triangle_meets_cube(tri, lo, side):
+    """True iff the closed triangle tri (3, 3) meets the closed cube lo + [0, side]^3.
+
+    Separating-axis test (Akenine-Moller 2001): the cube's 3 normals, the triangle's
+    normal and the 9 cross products of their edges.  Float; callers widen the cube by a
+    margin so that rounding can only add cubes.
+    """
+    half = 0.5 * side
+    v = np.empty((3, 3))
+    for k in range(3):
+        for i in range(3):
+            v[k, i] = tri[k, i] - (lo[i] + half)
+    for i in range(3):
+        if min(v[0, i], v[1, i], v[2, i]) > half or max(v[0, i], v[1, i], v[2, i]) < -half:
+            return False
+    e = np.empty((3, 3))
+    for k in range(3):
+        for i in range(3):
+            e[k, i] = v[(k + 1) % 3, i] - v[k, i]
+    nx = e[0, 1] * e[1, 2] - e[0, 2] * e[1, 1]
+    ny = e[0, 2] * e[1, 0] - e[0, 0] * e[1, 2]
+    nz = e[0, 0] * e[1, 1] - e[0, 1] * e[1, 0]
+    if _axis_separates(nx, ny, nz, v[0], v[1], v[2], half):
+        return False
+    for k in range(3):
+        # cross(unit axis i, edge k)
+        if _axis_separates(0.0, -e[k, 2], e[k, 1], v[0], v[1], v[2], half):
+            return False
+        if _axis_separates(e[k, 2], 0.0, -e[k, 0], v[0], v[1], v[2], half):
+            return False
+        if _axis_separates(-e[k, 1], e[k, 0], 0.0, v[0], v[1], v[2], half):
+            return False
+    return True
+
+
+@nb.njit(cache=True)
+def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
+    """Morton keys (octree coordinates at lattice resolution) of the cells of side
+    2**cell_bits lattice units that each triangle meets, with repeats."""
+    unit = float(np.int64(1) << snap_bits)
+    side = float(np.int64(1) << cell_bits)
+    margin = 1e-7 * side
+    out = np.empty(4 * faces.shape[0] + 16, dtype=np.int64)
+    m = 0
+    tri = np.empty((3, 3))
+    lo = np.empty(3)
+    for f in range(faces.shape[0]):
+        for k in range(3):
+            for i in range(3):
+                tri[k, i] = snapped[faces[f, k], i] / unit
+        c0 = np.empty(3, dtype=np.int64)
+        c1 = np.empty(3, dtype=np.int64)
+        for i in range(3):
+            c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) + margin) / side - 1e-9)) - 1
+            c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) - margin) / side + 1e-9)) + 1
+        for z in range(max(c0[2], 0), c1[2] + 1):
+            for y in range(max(c0[1], 0), c1[1] + 1):
+                for x in range(max(c0[0], 0), c1[0] + 1):
+                    lo[0] = x * side - margin
+                    lo[1] = y * side - margin
+                    lo[2] = z * side - margin
+                    if not triangle_meets_cube(tri, lo, side + 2 * margin):
+                        continue
+                    if m == out.shape[0]:
+                        out = np.concatenate((out, np.empty(m, dtype=np.int64)))
+                    out[m] = morton_key(x << cell_bits, y << cell_bits, z << cell_bits)
+                    m += 1
+    return out[:m].copy()
+
+
+def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> np.ndarray:
+    """Sorted keys of the octants of ``level`` whose closed cube (in u) meets a triangle.
+
+    snapped: (V, 3) int64 surface vertices in lattice units * 2**snap_bits.  Exact up to a
+    relative margin of 1e-7 of the cell side, on the side of listing more cells: an octant not
+    listed contains no surface point, so all its points have one inside/outside class.
+    """
+    keys = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
+    return np.unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+
+
+@nb.njit(cache=True)
+def _neighbour_keys(keys, level):
+    side = octant_len(level)
+    root = np.int64(1) << MAX_LEVEL
+    out = np.empty(27 * keys.shape[0], dtype=np.int64)
+    m = 0
+    for i in range(keys.shape[0]):
+        x, y, z = morton_coords(keys[i])
+        for dz in range(-1, 2):
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    nx = x + dx * side
+                    ny = y + dy * side
+                    nz = z + dz * side
+                    if nx < 0 or ny < 0 or nz < 0 or nx >= root or ny >= root or nz >= root:
+                        continue
+                    out[m] = morton_key(nx, ny, nz)
+                    m += 1
+    return out[:m]
+
+
+def with_ring(keys: np.ndarray, level: int) -> np.ndarray:
+    """Sorted keys of the octants of ``level`` in ``keys`` or touching one of them (face, edge or corner)."""
+    return np.unique(_neighbour_keys(np.asarray(keys, dtype=np.int64), level))
+
+
 def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndarray:
     """All descendants at ``level_to`` of sorted octants at ``level_from``, sorted."""
     depth = level_to - level_from
@@ -229,20 +347,30 @@ def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarra
 
 
 @nb.njit(cache=True)
-def _insulation_parents(keys, levels, level):
-    """The 26 neighbours (level - 1, inside the root) of the parents of the octants at ``level``.
+def _parent_keys(keys, levels, level):
+    """Parent keys of the octants at ``level``."""
+    out = np.empty(keys.shape[0], dtype=np.int64)
+    m = 0
+    for i in range(keys.shape[0]):
+        if levels[i] == level:
+            out[m] = octant_parent_key(keys[i], level)
+            m += 1
+    return out[:m]
+
+
+@nb.njit(cache=True)
+def _insulation_parents(parents, level):
+    """The 26 neighbours (level - 1, inside the root) of the parents (level - 1) of octants at ``level``.
 
     Splitting a parent makes all eight children leaves of ``level``, so each of them needs its
     neighbours at ``level - 1`` or finer: those are the parent's same-size neighbours.
     """
     side = octant_len(level - 1)
     root = np.int64(1) << MAX_LEVEL
-    out = np.empty(26 * keys.shape[0] + 1, dtype=np.int64)
+    out = np.empty(26 * parents.shape[0] + 1, dtype=np.int64)
     m = 0
-    for i in range(keys.shape[0]):
-        if levels[i] != level:
-            continue
-        x, y, z = morton_coords(octant_parent_key(keys[i], level))
+    for i in range(parents.shape[0]):
+        x, y, z = morton_coords(parents[i])
         for dz in range(-1, 2):
             for dy in range(-1, 2):
                 for dx in range(-1, 2):
@@ -271,7 +399,7 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
     seeds_k, seeds_l = [keys], [levels]
     current_k, current_l = keys, levels
     for level in range(int(levels.max(initial=0)), 1, -1):
-        parents = np.unique(_insulation_parents(current_k, current_l, level))
+        parents = np.unique(_insulation_parents(np.unique(_parent_keys(current_k, current_l, level)), level))
         seeds_k.append(parents)
         seeds_l.append(np.full(parents.shape[0], level - 1, dtype=np.int8))
         current_k = np.concatenate([current_k, parents])

@@ -17,6 +17,7 @@ import numpy as np
 from .topology import TET_FACES as _FACES
 from .topology import boundary_faces, match_faces, nonmanifold_vertices
 
+
 @nb.njit(cache=True)
 def _vertex_tets(tets, n_vertices):
     """CSR of the tets around each vertex: (offsets (V+1,), tet ids)."""

@@ -1,0 +1,152 @@
+"""Element size control: where the octree must be fine, as seed octants for balancing.
+
+The finest long edge is ``size`` (the frame's h, used all along the boundary); the interior
+coarsens up to ``max_size`` (a power-of-two multiple of ``size``).  Between the two, boxes,
+spheres and a vectorised size function h(x) ask for smaller elements where they need them.
+Sizes are long edges in model units; an octant of level l has long edge h * 2**(levels - l).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .errors import ParoctError
+from .frame import CUBE_CORNERS, FatFrame
+from .octant import MAX_LEVEL, morton_decode
+from .octree import refine_to_level, uniform_leaves
+
+#: Default max_size as a multiple of size.
+DEFAULT_MAX_SIZE_FACTOR = 8
+
+
+@dataclass(frozen=True)
+class Box:
+    """Elements of long edge at most ``size`` in the axis-aligned box [lo, hi] (model units)."""
+
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+    size: float
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Euclidean distance (N,) of points (N, 3) to the box, 0 inside."""
+        gap = np.maximum(np.asarray(self.lo) - points, 0) + np.maximum(points - np.asarray(self.hi), 0)
+        return np.sqrt((gap**2).sum(axis=1))
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """Elements of long edge at most ``size`` in the ball of ``radius`` around ``center``."""
+
+    center: tuple[float, float, float]
+    radius: float
+    size: float
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        return np.maximum(np.sqrt(((points - np.asarray(self.center)) ** 2).sum(axis=1)) - self.radius, 0.0)
+
+
+Region = Box | Sphere
+SizeFunction = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class SizeField:
+    """What the user asked for: finest size, largest interior size, local refinements."""
+
+    size: float
+    max_size: float
+    regions: tuple = ()
+    function: SizeFunction | None = None
+
+    @property
+    def coarse_depth(self) -> int:
+        """Levels between the finest octants and the largest interior ones: log2(max_size / size)."""
+        return int(round(np.log2(self.max_size / self.size)))
+
+
+def size_field(size: float, max_size: float | None = None, regions: Sequence[Region] = (),
+               function: SizeFunction | None = None) -> SizeField:
+    """Checked size field.  max_size defaults to DEFAULT_MAX_SIZE_FACTOR * size and is rounded
+    down to a power-of-two multiple of size."""
+    if max_size is None:
+        max_size = DEFAULT_MAX_SIZE_FACTOR * size
+    if not (np.isfinite(max_size) and max_size >= size):
+        raise ParoctError(f"max_size = {max_size:.6g} must be at least size = {size:.6g}")
+    depth = int(np.floor(np.log2(max_size / size) + 1e-9))
+    depth = min(depth, MAX_LEVEL)
+    for r in regions:
+        if not isinstance(r, (Box, Sphere)):
+            raise ParoctError(f"refinement region {r!r} is not a paroct Box or Sphere")
+        if not (np.isfinite(r.size) and r.size > 0):
+            raise ParoctError(f"refinement region size = {r.size}: must be a positive number")
+        if isinstance(r, Box) and not np.all(np.asarray(r.lo) <= np.asarray(r.hi)):
+            raise ParoctError(f"refinement box lo = {r.lo} is not below hi = {r.hi}")
+        if isinstance(r, Sphere) and not (np.isfinite(r.radius) and r.radius >= 0):
+            raise ParoctError(f"refinement sphere radius = {r.radius}: must be a non-negative number")
+    if function is not None and not callable(function):
+        raise ParoctError("size_function must be callable: (N, 3) points -> (N,) sizes")
+    return SizeField(size=float(size), max_size=float(size * 2**depth), regions=tuple(regions), function=function)
+
+
+def _octant_boxes(keys: np.ndarray, level: int, frame: FatFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Space bounding boxes (lo, hi (N, 3)) and sample points (N, 9, 3): the 8 corners and
+    the centre, of octants of ``level``."""
+    shift = MAX_LEVEL - frame.levels
+    side = float(1 << (frame.levels - level))
+    anchors = (morton_decode(keys) >> shift).astype(np.float64)
+    offsets = np.vstack([CUBE_CORNERS, [[0.5, 0.5, 0.5]]]) * side
+    samples = frame.to_space((anchors[:, None, :] + offsets[None]).reshape(-1, 3)).reshape(-1, 9, 3)
+    corner = samples[:, 0]
+    # Each row of the lattice-to-space map is a permutation of (1/2, 1/2, -1/2).
+    return corner - frame.h * side / 2, corner + frame.h * side, samples
+
+
+def _required_size(field: SizeField, keys: np.ndarray, level: int, frame: FatFrame) -> np.ndarray:
+    """Smallest size (N,) asked for anywhere in each octant (regions) or at its corners and
+    centre (function)."""
+    lo, hi, samples = _octant_boxes(keys, level, frame)
+    need = np.full(keys.shape[0], np.inf)
+    for r in field.regions:
+        if isinstance(r, Box):
+            meets = np.all((lo <= np.asarray(r.hi)) & (hi >= np.asarray(r.lo)), axis=1)
+        else:
+            gap = np.maximum(lo - np.asarray(r.center), 0) + np.maximum(np.asarray(r.center) - hi, 0)
+            meets = (gap**2).sum(axis=1) <= r.radius**2
+        need[meets] = np.minimum(need[meets], r.size)
+    if field.function is not None and keys.shape[0]:
+        points = samples.reshape(-1, 3)
+        try:
+            values = np.asarray(field.function(points), dtype=np.float64)
+        except Exception as exc:  # the user's function failed: say so in one line
+            raise ParoctError(f"size_function failed on {points.shape[0]} points: {exc}") from None
+        if values.shape != (points.shape[0],):
+            raise ParoctError(f"size_function returned shape {values.shape} for {points.shape[0]} points; expected ({points.shape[0]},)")
+        if not np.all(values > 0):
+            raise ParoctError("size_function returned a non-positive or NaN size")
+        need = np.minimum(need, values.reshape(-1, 9).min(axis=1))
+    return need
+
+
+def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field: SizeField) -> tuple[np.ndarray, np.ndarray]:
+    """Seed octants (keys (N,) int64, levels (N,) int8) covering the box: the coarsest octants
+    no larger than max_size whose long edge is at most the size asked for in them (never
+    below the finest level).  Sizes smaller than ``size`` are clamped to it."""
+    finest = frame.levels
+    level = max(0, finest - field.coarse_depth)
+    keys, _ = uniform_leaves(frame, box_min, box_max, level)
+    out_keys, out_levels = [], []
+    while level < finest and keys.shape[0]:
+        if not field.regions and field.function is None:
+            break
+        edge = frame.h * 2.0 ** (finest - level)
+        split = _required_size(field, keys, level, frame) < edge
+        out_keys.append(keys[~split])
+        out_levels.append(np.full(int((~split).sum()), level, dtype=np.int8))
+        keys = refine_to_level(keys[split], level, level + 1)
+        level += 1
+    out_keys.append(keys)
+    out_levels.append(np.full(keys.shape[0], level, dtype=np.int8))
+    return np.concatenate(out_keys), np.concatenate(out_levels)

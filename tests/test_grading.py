@@ -1,0 +1,211 @@
+"""Graded octrees: transition templates, random balanced trees, surface cells, size control."""
+
+import itertools
+
+import manifold3d
+import numpy as np
+import pytest
+
+from .naive import cells_meeting_triangles
+from paroct import lattice, octant
+from paroct.errors import ParoctError
+from paroct.frame import LATTICE_TO_SPACE, fat_frame
+from paroct.mesher import mesh
+from paroct.octree import balance, surface_cells, tree_is_balanced, with_ring
+from paroct.quality import tet_quality
+from paroct.sizing import Box, Sphere
+from paroct.surface import load_surface
+from paroct.topology import boundary_faces, match_faces
+from paroct.transitions import (
+    CHAIN_IS_ODD,
+    CHAIN_SPLITS,
+    CHAINS,
+    EAGER_MASKS,
+    SPLIT_POINT_OFFSETS,
+    TEMPLATES,
+)
+
+FAT_RATIO = 3 / np.sqrt(10)
+ML = octant.MAX_LEVEL
+EPS = 1e-9
+
+
+def _chain_points(chain, side=2):
+    """Space points (9, 3) of the template labels v0..v3, m01, m12, m23, m02, m13 of a chain."""
+    corners = np.array([[(c >> i) & 1 for i in range(3)] for c in chain]) * side
+    pairs = ((0, 1), (1, 2), (2, 3), (0, 2), (1, 3))
+    mids = np.array([(corners[i] + corners[j]) / 2 for i, j in pairs])
+    return np.vstack([corners, mids]) @ LATTICE_TO_SPACE.T
+
+
+@pytest.mark.parametrize("mask", sorted(TEMPLATES))
+def test_each_template_tiles_its_chain_tet_with_good_angles(mask):
+    for c, chain in enumerate(CHAINS):
+        pts = _chain_points(chain)
+        tets = np.array(TEMPLATES[mask], dtype=np.int64)
+        if CHAIN_IS_ODD[c]:
+            tets = tets[:, [0, 2, 1, 3]]
+        q = tet_quality(pts, tets.astype(np.int32))
+        whole = tet_quality(pts, np.array([[0, 1, 2, 3]] if not CHAIN_IS_ODD[c] else [[0, 2, 1, 3]], dtype=np.int32))
+        assert np.all(q.volume > 0), f"mask {mask} chain {chain}: inverted tet"
+        assert q.volume.sum() == pytest.approx(whole.volume[0], rel=1e-12)
+        # Interior faces are shared by two tets on opposite sides, so the tets tile the chain tet.
+        _, overloaded, same_side = match_faces(tets.astype(np.int32))
+        assert overloaded == 0 and same_side == 0
+        # Each template vertex it uses that is a split point must be flagged by the mask.
+        used = set(tets.ravel().tolist())
+        assert all((mask >> (k - 4)) & 1 for k in used if k >= 4)
+        assert q.min_dihedral.min() >= 30 - EPS and q.max_dihedral.max() <= 135 + EPS
+        if mask in EAGER_MASKS:
+            assert q.min_dihedral.min() >= 35.26 and q.max_dihedral.max() <= 120 + EPS
+            assert q.radius_ratio.min() >= 0.544
+
+
+def test_split_point_tables_agree_with_chain_midpoints():
+    for chain, splits in zip(CHAINS, CHAIN_SPLITS):
+        corners = np.array([[(c >> i) & 1 for i in range(3)] for c in chain])
+        for (i, j), p in zip(((0, 1), (1, 2), (2, 3), (0, 2), (1, 3)), splits):
+            assert np.array_equal(corners[i] + corners[j], SPLIT_POINT_OFFSETS[p])
+    assert len({tuple(o) for o in SPLIT_POINT_OFFSETS}) == 18
+
+
+def _random_balanced_tree(seed, max_level):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 10))
+    levels = rng.integers(1, max_level + 1, size=n)
+    keys = [octant.morton_key(*(rng.integers(0, 1 << lev, size=3) << (ML - lev))) for lev in levels]
+    keys, levels = balance(np.array(keys, dtype=np.int64), levels.astype(np.int8))
+    assert tree_is_balanced(keys, levels)
+    anchors = octant.morton_decode(keys) >> (ML - max_level)
+    sides = np.int64(1) << (max_level - levels.astype(np.int64))
+    return anchors, sides
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_random_balanced_trees_conform_with_template_quality(seed):
+    max_level = 3 + seed % 3
+    anchors, sides = _random_balanced_tree(seed, max_level)
+    coords, tets = lattice.leaf_tets(anchors, sides)
+    points = coords @ LATTICE_TO_SPACE.T
+    q = tet_quality(points, tets)
+    assert np.all(q.volume > 0)
+    root = 1 << max_level
+    assert q.volume.sum() == pytest.approx(0.5 * root**3, rel=1e-12)  # det(LATTICE_TO_SPACE) = 1/2
+    neighbour, overloaded, same_side = match_faces(tets)
+    assert overloaded == 0 and same_side == 0
+    # No hanging vertex: the only boundary faces lie on the root cube's faces.
+    face_coords = coords[boundary_faces(tets, neighbour)]
+    on_root = ((face_coords == 0) | (face_coords == root)).all(axis=1).any(axis=1)
+    assert on_root.all()
+    assert q.min_dihedral.min() >= 35.26 and q.max_dihedral.max() <= 120 + EPS
+    assert q.radius_ratio.min() >= 0.544
+    # Leaves with no finer neighbour keep their six fat tets.
+    vertices = lattice.number_vertices(anchors, sides)
+    plain = np.ones(len(sides), dtype=bool)
+    plain[sides >= 2] = (vertices.split_ids < 0).all(axis=1)
+    assert np.isclose(q.radius_ratio, FAT_RATIO, atol=1e-9).sum() >= 6 * plain.sum()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_dense_and_hashed_vertex_numbering_agree(monkeypatch, seed):
+    anchors, sides = _random_balanced_tree(100 + seed, 4)
+    monkeypatch.setattr(lattice, "DENSE_SLOTS_PER_LEAF", 1e9)
+    dense = lattice.number_vertices(anchors, sides)
+    monkeypatch.setattr(lattice, "DENSE_SLOTS_PER_LEAF", 0)
+    hashed = lattice.number_vertices(anchors, sides)
+    for a, b in zip((dense.corner_ids, dense.split_ids, dense.coords), (hashed.corner_ids, hashed.split_ids, hashed.coords)):
+        assert np.array_equal(a, b)
+    corners = anchors[:, None, :] + sides[:, None, None] * lattice.CUBE_CORNERS[None, :, :]
+    assert np.array_equal(dense.coords[dense.corner_ids], corners)
+    assert len(np.unique(dense.coords, axis=0)) == len(dense.coords)
+    rows = np.nonzero(dense.split_row >= 0)[0]
+    expected = anchors[rows, None, :] + (sides[rows, None, None] // 2) * SPLIT_POINT_OFFSETS[None]
+    has = dense.split_ids[dense.split_row[rows]] >= 0
+    assert np.array_equal(dense.coords[dense.split_ids[dense.split_row[rows]][has]], expected[has])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_surface_cells_match_polygon_clipping(seed):
+    rng = np.random.default_rng(seed)
+    frame = fat_frame(np.zeros(3), np.ones(3), 0.25)  # levels small enough for a brute-force twin
+    n_cells = 1 << frame.levels
+    bits = 28 - frame.levels
+    # Random triangles plus degenerate ones: axis-aligned, on cell planes, needles.
+    tris = rng.uniform(0.5, n_cells - 0.5, size=(6, 3, 3))
+    tris = np.concatenate([tris, [[[2, 2, 2], [5, 2, 2], [2, 5, 2]], [[3, 3, 1.5], [3, 3, 6.5], [3.0000001, 3, 4]]]])
+    tris = np.round(tris * (1 << bits)) / (1 << bits)
+    snapped = (tris.reshape(-1, 3) * (1 << bits)).astype(np.int64)
+    faces = np.arange(len(snapped)).reshape(-1, 3)
+    for level in (frame.levels, frame.levels - 1):
+        side = 1 << (frame.levels - level)
+        got = surface_cells(frame, snapped, faces, bits, level) >> (3 * (ML - frame.levels))
+        got = {tuple(int(v) // side for v in c) for c in octant.morton_decode(got)}
+        want = cells_meeting_triangles(tris, side, n_cells // side)
+        assert want <= got  # never misses a cell
+        extra = got - want  # only cells touching within the rounding margin
+        assert len(extra) <= 0.05 * len(want) + 2
+
+
+def test_with_ring_is_the_27_neighbourhood():
+    level = 4
+    side = 1 << (ML - level)
+    cells = [(1, 1, 1), (5, 0, 3), (15, 15, 15)]
+    keys = np.array([octant.morton_key(x * side, y * side, z * side) for x, y, z in cells], dtype=np.int64)
+    got = {tuple(int(v) // side for v in c) for c in octant.morton_decode(with_ring(np.sort(keys), level))}
+    want = {(x + dx, y + dy, z + dz) for x, y, z in cells for dx, dy, dz in itertools.product((-1, 0, 1), repeat=3)
+            if 0 <= x + dx < 16 and 0 <= y + dy < 16 and 0 <= z + dz < 16}
+    assert got == want
+
+
+def _edge_lengths(points, tets):
+    p = points[tets]
+    return np.stack([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in itertools.combinations(range(4), 2)], 1)
+
+
+def test_graded_mesh_is_coarse_inside_fine_at_the_boundary_and_interior_tets_good():
+    surface = load_surface(manifold3d.Manifold.sphere(1.0, 64))
+    graded = mesh(surface, size=0.05)
+    uniform = mesh(surface, size=0.05, max_size=0.05)
+    r = graded.report
+    assert r.leaf_levels == (0, 1, 2, 3)
+    assert r.n_tets < 0.6 * uniform.report.n_tets  # 0.52 here; the ratio falls as size shrinks
+    assert r.interior_min_dihedral >= 35.26 and r.interior_max_dihedral <= 120 + EPS
+    assert 10.7 <= r.min_dihedral and r.max_dihedral <= 164.8
+    assert abs(r.volume_error) < 0.01 and r.boundary_components == 1 and r.boundary_genus == 0
+    # Same boundary: the finest band is the same in both meshes.
+    b_graded = boundary_faces(graded.mesh.tets, match_faces(graded.mesh.tets)[0])
+    b_uniform = boundary_faces(uniform.mesh.tets, match_faces(uniform.mesh.tets)[0])
+    assert len(b_graded) == len(b_uniform)
+    assert np.allclose(np.sort(graded.mesh.points[b_graded].reshape(-1, 3), axis=0),
+                       np.sort(uniform.mesh.points[b_uniform].reshape(-1, 3), axis=0))
+    # Edges grow towards max_size = 8 * size inside (0.4 * sqrt(3)/2: short edges of the coarsest
+    # leaves, which all border finer ones in a ball this small), never beyond.
+    longest = _edge_lengths(graded.mesh.points, graded.mesh.tets).max()
+    assert 0.4 * np.sqrt(3) / 2 - 1e-9 <= longest <= 0.4 + 1e-9
+
+
+def test_regions_and_size_function_refine_where_asked():
+    box = manifold3d.Manifold.cube([2.0, 2.0, 2.0])
+    base = mesh(box, size=0.1).mesh
+    sphere = Sphere(center=(1.0, 1.0, 1.0), radius=0.3, size=0.1)
+    refined = mesh(box, size=0.1, regions=[sphere]).mesh
+    near = lambda m: np.linalg.norm(m.points[m.tets].mean(axis=1) - 1.0, axis=1) < 0.3  # noqa: E731
+    assert _edge_lengths(base.points, base.tets)[near(base)].max() > 0.3
+    assert _edge_lengths(refined.points, refined.tets)[near(refined)].max() <= 0.1 + 1e-9
+    by_function = mesh(box, size=0.1, size_function=lambda x: np.where(np.linalg.norm(x - 1.0, axis=1) < 0.5, 0.1, 1.0)).mesh
+    assert _edge_lengths(by_function.points, by_function.tets)[near(by_function)].max() <= 0.1 + 1e-9
+    boxed = mesh(box, size=0.1, regions=[Box(lo=(0.8, 0.8, 0.8), hi=(1.2, 1.2, 1.2), size=0.2)]).mesh
+    assert _edge_lengths(boxed.points, boxed.tets)[near(boxed)].max() <= 0.2 + 1e-9
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"max_size": 0.05}, "max_size"),
+    ({"regions": [Sphere((0, 0, 0), 1.0, -1.0)]}, "region size"),
+    ({"regions": ["box"]}, "Box or Sphere"),
+    ({"size_function": lambda x: np.ones(3)}, "shape"),
+    ({"size_function": lambda x: -np.ones(len(x))}, "non-positive"),
+    ({"size_function": lambda x: 1 / 0}, "size_function failed"),
+])
+def test_size_control_errors_are_one_line(kwargs, match):
+    with pytest.raises(ParoctError, match=match):
+        mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), size=0.1, **kwargs)
