@@ -57,8 +57,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output mesh; format by extension (.vtu, .msh, .mesh, .inp, .vtk, ...); "
                         "default: SURFACE's name with .vtu in the current folder")
     size = m.add_mutually_exclusive_group()
-    size.add_argument("--size", type=float, metavar="H", help="long edge of the lattice tets, model units")
+    size.add_argument("--size", type=float, metavar="H", help="finest long edge (used along the boundary), model units")
     size.add_argument("--divisions", type=float, metavar="N", help="size = bounding-box diagonal / N (default 40)")
+    grading = m.add_mutually_exclusive_group()
+    grading.add_argument("--max-size", type=float, metavar="H",
+                         help="largest long edge inside, rounded down to size * 2^k (default 8 x size)")
+    grading.add_argument("--uniform", action="store_true", help="one size everywhere (max size = size)")
+    m.add_argument("--refine-box", type=float, nargs=7, action="append", default=[],
+                   metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1", "H"),
+                   help="long edge at most H in the box [X0,X1]x[Y0,Y1]x[Z0,Z1] (repeatable)")
+    m.add_argument("--refine-sphere", type=float, nargs=5, action="append", default=[],
+                   metavar=("X", "Y", "Z", "R", "H"), help="long edge at most H within R of (X, Y, Z) (repeatable)")
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
     talk = m.add_mutually_exclusive_group()
@@ -104,7 +113,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run_mesh(args: argparse.Namespace) -> int:
     from .io import output_format, write_mesh
-    from .mesher import mesh
+    from .mesher import mesh, resolve_size
+    from .sizing import Box, Sphere
+    from .surface import load_surface
 
     source = Path(args.surface)
     out = Path(args.output) if args.output else Path.cwd() / (source.stem + ".vtu")
@@ -124,8 +135,12 @@ def _run_mesh(args: argparse.Namespace) -> int:
     if not args.quiet and not _kernels_cached():
         _err("compiling the numba kernels on this first run (about 20 s on 2 cores; cached afterwards)")
     t0 = time.perf_counter()
-    result = mesh(source, args.size, divisions=args.divisions, max_memory=max_memory,
-                  progress=progress if args.verbose else None)
+    regions = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
+    regions += [Sphere(center=tuple(b[:3]), radius=b[3], size=b[4]) for b in args.refine_sphere]
+    surface = load_surface(source)
+    max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
+    result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
+                  max_memory=max_memory, progress=progress if args.verbose else None)
     t1 = time.perf_counter()
     write_mesh(out, result.mesh.points, result.mesh.tets)
     t2 = time.perf_counter()
@@ -142,7 +157,9 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
     err = report.volume_error
     err_text = "n/a" if math.isnan(err) else f"{100 * err:+.2f}%"
     lines = [
-        f"wrote {out}: {report.n_tets} tets, {report.n_vertices} vertices (size {report.size:.4g}, {report.levels} levels)",
+        f"wrote {out}: {report.n_tets} tets, {report.n_vertices} vertices",
+        f"size {report.size:.4g} .. {report.size * 2 ** max(report.leaf_levels, default=0):.4g} "
+        f"({len(report.leaf_levels)} leaf levels), {100 * report.fat_fraction:.1f}% exactly fat tets",
         f"dihedral angles {report.min_dihedral:.2f} .. {report.max_dihedral:.2f} deg, min 3r/R {report.min_radius_ratio:.4f}",
         f"volume {report.mesh_volume:.6g}, solid {report.solid_volume:.6g} ({err_text})",
         f"boundary {report.boundary_components} components, genus {report.boundary_genus}"
@@ -150,7 +167,10 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
         f"input {report.input_components} components, genus {report.input_genus}",
     ]
     if verbose:
-        lines.append(f"unresolved cuts {report.unresolved_cuts}, repaired tets {report.repaired_tets}")
+        lines.append(f"unresolved cuts {report.unresolved_cuts}, repaired tets {report.repaired_tets}, "
+                     f"{report.n_leaves} leaves, frame depth {report.levels}")
+        lines.append(f"tets the boundary does not touch: dihedral {report.interior_min_dihedral:.2f} .. "
+                     f"{report.interior_max_dihedral:.2f} deg")
         lines += [f"  {stage:<10} {seconds:8.3f} s" for stage, seconds in report.stage_seconds.items()]
         lines.append(f"  {'write':<10} {write_seconds:8.3f} s")
     lines.append(f"time {mesh_seconds + write_seconds:.3f} s")

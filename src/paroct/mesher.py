@@ -16,10 +16,10 @@ import numpy as np
 from . import rays
 from .errors import ParoctError
 from .features import ThinFeatures, thin_features
-from .frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
+from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
 from .lattice import graded_tets, number_vertices
-from .octant import MAX_LEVEL
-from .octree import balance, octant_lattice_anchors, surface_cells, with_ring
+from .octant import MAX_LEVEL, morton_keys
+from .octree import balance, octant_lattice_anchors, surface_cells
 from .quality import tet_quality
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
@@ -198,7 +198,7 @@ def mesh(
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-    keys, levels = graded_leaves(frame, snapped, faces, crossings[X_AXIS_DIRECTION], surface, field)
+    keys, levels = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = tuple(int(v) for v in np.unique(frame.levels - levels))
     stages.done("octree")
@@ -275,28 +275,42 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
     return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 
-def graded_leaves(frame: FatFrame, snapped, faces, x_crossings: rays.RowCrossings, surface: Surface,
-                  field: SizeField) -> tuple[np.ndarray, np.ndarray]:
+def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Surface, field: SizeField,
+                  report: MeshReport) -> tuple[np.ndarray, np.ndarray]:
     """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may hold
     inside tets.
 
-    The finest level covers every cell the surface meets plus one ring of cells around them,
-    so stuffing cuts and warps only fat tets of one size (the Labelle-Shewchuk setting) and no
-    transition leaf touches a warped vertex; elsewhere the size field decides, up to max_size.
-    Leaves the surface does not meet lie wholly inside or outside: the winding number at their
-    anchor decides, and outside leaves are dropped.
+    The finest level holds the *band*: every cell with corners of both classes (cut cells: all
+    tets that stuffing cuts) and every cell with a corner that stuffing warps.  So stuffing only
+    touches fat tets of one size (the Labelle-Shewchuk setting), and the boundary is exactly the
+    uniform lattice's.  Every other leaf has all finest-level lattice points in its closure of
+    one class (else a fine edge in it would be cut and its cell in the band), and none warped:
+    its anchor's winding number classifies it, outside leaves are dropped, and inside leaves
+    emit fat tets or transition templates.  The size field decides the rest, up to max_size.
     """
     finest = frame.levels
-    cut = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
-    band = with_ring(cut, finest)
+    x_crossings = crossings[X_AXIS_DIRECTION]
+    met = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
+    anchors = octant_lattice_anchors(met, frame)
+    vertices = number_vertices(anchors, np.ones(met.shape[0], dtype=np.int64))
+    inside = rays.winding_numbers(x_crossings, vertices.coords) > 0
+    corner_inside = inside[vertices.corner_ids]
+    is_cut = corner_inside.any(axis=1) & ~corner_inside.all(axis=1)
+    cut_tets = graded_tets(vertices)[np.repeat(is_cut, 6)]
+    cuts = cut_edges(frame, snapped, faces, vertices.coords, cut_tets, inside, crossings, report)
+    warped = vertices.coords[warp_targets(cuts, vertices.coords.shape[0], frame.h) >= 0]
+    around = (warped[:, None, :] - CUBE_CORNERS[None, :, :]).reshape(-1, 3)  # the 8 cells at each warped vertex
+    around = around[(around >= 0).all(axis=1)]
+    band = np.unique(np.concatenate([met[is_cut], morton_keys(around << (MAX_LEVEL - finest))]))
     seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field)
     keys, levels = balance(np.concatenate([band, seed_keys]),
                            np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
-    meets = np.zeros(keys.shape[0], dtype=bool)
+    in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
-    meets[fine] = np.isin(keys[fine], cut, assume_unique=True)
-    keep = meets.copy()
-    keep[~meets] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~meets], frame)) > 0
+    in_band[fine] = np.isin(keys[fine], band, assume_unique=True)
+    keep = in_band.copy()
+    keep[~in_band] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~in_band], frame)) > 0
+    report.unresolved_cuts = 0  # counted again, once, when the final mesh is cut
     return keys[keep], levels[keep]
 
 
