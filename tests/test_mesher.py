@@ -121,16 +121,39 @@ def test_meshing_is_deterministic():
     assert np.array_equal(a.points, b.points) and np.array_equal(a.tets, b.tets)
 
 
-def test_thin_solid_warns_or_fails_with_advice():
+def test_thin_solid_warns_or_fails_with_advice_when_refinement_is_off():
     # A 1 x 1 x 0.02 plate at size 0.05: nothing survives, and the error names the thickness.
     plate = manifold3d.Manifold.cube([1.0, 1.0, 0.02])
     with pytest.raises(ParoctError, match=r"thinnest wall 0\.02"):
-        mesh(plate, size=0.05)
+        mesh(plate, size=0.05, thin_features=False)
     # A block with a thin fin: the fin is lost, and the warning says so with a size that keeps it.
-    part = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + manifold3d.Manifold.cube([1.0, 0.03, 0.5]).translate([0, 0, 0.5])
-    result = mesh(part, size=0.1)
+    result = mesh(_FIN_PART, size=0.1, thin_features=False)
     assert result.report.warnings and "thinnest wall" in result.report.warnings[0]
     assert "size = 0.015" in result.report.warnings[0]
+
+
+_FIN_PART = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + manifold3d.Manifold.cube([1.0, 0.03, 0.5]).translate([0, 0, 0.5])
+
+
+def test_thin_walls_refine_the_boundary_until_two_layers_span_them():
+    surface = load_surface(_FIN_PART)
+    result = mesh(surface, size=0.1)
+    rep = result.report
+    # 0.03 thick: two layers need size <= 0.015, so 0.1 halves three times to 0.0125.
+    assert rep.size == pytest.approx(0.0125) and rep.requested_size == pytest.approx(0.1)
+    assert any("wall 0.03" in note for note in rep.notes) and not rep.warnings
+    assert abs(rep.volume_error) < 0.01
+    assert (rep.boundary_components, rep.boundary_genus) == (surface.components, surface.genus)
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+    # The interior still coarsens (towards max_size = 8 x the requested size).
+    assert rep.max_size == pytest.approx(0.8) and max(rep.leaf_levels) >= 3  # 0.1 and coarser inside
+
+
+def test_min_size_floor_is_reported_in_one_line():
+    result = mesh(_FIN_PART, size=0.1, min_size=0.05)
+    rep = result.report
+    assert rep.size == pytest.approx(0.05)
+    assert len(rep.warnings) == 1 and "min_size = 0.05 reached" in rep.warnings[0] and "thinnest wall" in rep.warnings[0]
 
 
 def test_size_checks():

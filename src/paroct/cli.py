@@ -63,6 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
     grading.add_argument("--max-size", type=float, metavar="H",
                          help="largest long edge inside, rounded down to size * 2^k (default 8 x size)")
     grading.add_argument("--uniform", action="store_true", help="one size everywhere (max size = size)")
+    m.add_argument("--min-size", type=float, metavar="H",
+                   help="smallest boundary size that thin walls and gaps may ask for (default size / 8)")
+    m.add_argument("--keep-size", action="store_true",
+                   help="do not refine for thin walls and gaps (only warn when the mesh loses them)")
     m.add_argument("--refine-box", type=float, nargs=7, action="append", default=[],
                    metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1", "H"),
                    help="long edge at most H in the box [X0,X1]x[Y0,Y1]x[Z0,Z1] (repeatable)")
@@ -140,6 +144,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     surface = load_surface(source)
     max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
     result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
+                  thin_features=not args.keep_size, min_size=args.min_size,
                   max_memory=max_memory, progress=progress if args.verbose else None)
     t1 = time.perf_counter()
     write_mesh(out, result.mesh.points, result.mesh.tets)
@@ -166,6 +171,7 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
         f"{'' if report.boundary_manifold else ', NOT manifold'}; "
         f"input {report.input_components} components, genus {report.input_genus}",
     ]
+    lines += [f"note: {note}" for note in report.notes]
     if verbose:
         lines.append(f"unresolved cuts {report.unresolved_cuts}, repaired tets {report.repaired_tets}, "
                      f"{report.n_leaves} leaves, frame depth {report.levels}")

@@ -76,15 +76,17 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return n / np.where(length > 0, length, 1.0)[:, None]
 
 
-def thin_features(frame: FatFrame, crossings: dict, vertices: np.ndarray, faces: np.ndarray) -> ThinFeatures:
-    """Wall and gap thickness samples from the crossings of the computed row directions."""
+def thin_features(frame: FatFrame, crossings: dict, vertices: np.ndarray, faces: np.ndarray,
+                  facing: float = FACING) -> ThinFeatures:
+    """Wall and gap thickness samples from the crossings of the computed row directions; the
+    two crossed triangles must have unit normals with dot product below ``facing``."""
     normals = face_normals(vertices, faces)
     parts = []
     for d, rc in sorted(crossings.items()):
         rc: RowCrossings
         vec = EDGE_DIRECTIONS[d] @ LATTICE_TO_SPACE.T
         step = float(np.linalg.norm(vec)) * frame.h
-        first, thick, wall = _facing_pairs(rc.keys, rc.fracs, rc.signs, rc.faces, normals, vec / np.linalg.norm(vec), step, FACING)
+        first, thick, wall = _facing_pairs(rc.keys, rc.fracs, rc.signs, rc.faces, normals, vec / np.linalg.norm(vec), step, facing)
         if first.size == 0:
             continue
         # Position of the first crossing: row (p2, p3) and cell j back to lattice coordinates.

@@ -15,7 +15,8 @@ import numpy as np
 
 from . import rays
 from .errors import ParoctError
-from .features import ThinFeatures, thin_features
+from .features import ThinFeatures
+from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
 from .lattice import graded_tets, number_vertices
 from .octant import MAX_LEVEL, morton_keys
@@ -64,6 +65,7 @@ class MeshReport:
 
     size: float
     levels: int
+    requested_size: float = float("nan")
     max_size: float = float("nan")
     n_leaves: int = 0
     leaf_levels: tuple = ()
@@ -86,6 +88,7 @@ class MeshReport:
     repaired_tets: int = 0
     stage_seconds: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
 
     @property
     def volume_error(self) -> float:
@@ -156,6 +159,8 @@ def mesh(
     max_size: float | None = None,
     regions: Sequence[Region] = (),
     size_function: SizeFunction | None = None,
+    thin_features: bool = True,
+    min_size: float | None = None,
     max_memory: int | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> MeshResult:
@@ -167,28 +172,108 @@ def mesh(
     long edge inside (default 8 * size, rounded down to a power-of-two multiple of size;
     max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
     a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
-    evaluated at octant centres (both are clamped to at least size).  max_memory: bytes the
-    run may use (default: the machine's available memory); a size that would need more is
-    refused before any work.  progress: called with each stage's name when it ends.
+    evaluated at octant corners and centres (both are clamped to at least size).
+    thin_features: walls and gaps thinner than 2 * size make the boundary size smaller (by
+    halves, down to min_size, default size / 8) until two element layers span them, and the
+    mesh is refined again while it loses topology or more than 1 % of the volume; False keeps
+    size and only warns.  max_memory: bytes the run may use (default: the machine's available
+    memory); a size that would need more is refused before any work.  progress: called with
+    each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function)
-    report = MeshReport(size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
-                        input_genus=surface.genus, input_components=surface.components)
-    report.stage_seconds["load"] = time.perf_counter() - t0
+    floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else float(min_size)
+    if not (np.isfinite(floor) and floor > 0):
+        raise ParoctError(f"min_size = {min_size}: must be a positive number")
+    budget = _available_memory() if max_memory is None else int(max_memory)
+    _check_memory(surface, field, budget)
+    loaded = time.perf_counter() - t0
     if progress:
         progress("load")
-    stages = _Stages(report, progress)
 
-    box_tets = estimate_tets(surface, field)
-    budget = _available_memory() if max_memory is None else int(max_memory)
-    if box_tets * BYTES_PER_TET > budget:
+    band, notes, thin_seconds = h, [], 0.0
+    if thin_features and floor < h:
+        t = time.perf_counter()
+        band, notes = _thin_feature_size(surface, h, floor, field, budget)
+        thin_seconds = time.perf_counter() - t
+        if progress:
+            progress("features")
+    discarded = 0.0
+    while True:
+        report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
+                            input_genus=surface.genus, input_components=surface.components)
+        report.stage_seconds["load"] = loaded
+        if thin_seconds:
+            report.stage_seconds["features"] = thin_seconds
+        t = time.perf_counter()
+        attempt = size_field(band, field.max_size, field.regions, field.function)
+        result, lost, advice = _mesh_at(surface, attempt, report, progress)
+        finer = band / 2
+        if not (thin_features and lost and finer >= floor * (1 - 1e-9) and _fits(surface, attempt, finer, budget)):
+            break
+        notes.append(f"refined the boundary from size {band:.4g} to {finer:.4g}: at {band:.4g} {lost}")
+        discarded += time.perf_counter() - t
+        band = finer
+    if discarded:
+        report.stage_seconds["discarded"] = discarded
+    report.notes = notes
+    if lost:
+        if report.n_tets == 0:
+            raise ParoctError(f"no tets: the solid is thinner than size = {band:.4g} everywhere; {advice}")
+        floor_text = f"min_size = {floor:.4g} reached; " if thin_features and band / 2 < floor * (1 - 1e-9) else ""
+        report.warnings.append(f"{floor_text}{lost}; {advice}")
+    return result
+
+
+#: Default min_size: size divided by this.
+DEFAULT_MIN_SIZE_DIVISOR = 8
+#: Refine for walls and gaps whose two sides face each other this squarely (unit normals' dot
+#: product below it, about 25 degrees): knife edges and wedge tips are not walls.
+THIN_FACING = -0.9
+
+
+def _check_memory(surface: Surface, field: SizeField, budget: int) -> None:
+    tets = estimate_tets(surface, field)
+    if tets * BYTES_PER_TET > budget:
         raise ParoctError(
-            f"size = {h:.6g} needs about {box_tets:.3g} lattice tets and {box_tets * BYTES_PER_TET / 2**30:.1f} GiB, "
+            f"size = {field.size:.6g} needs about {tets:.3g} lattice tets and {tets * BYTES_PER_TET / 2**30:.1f} GiB, "
             f"more than the {budget / 2**30:.1f} GiB allowed; use a larger size or raise max_memory (--max-memory)"
         )
+
+
+def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
+    return estimate_tets(surface, size_field(band, field.max_size, field.regions, field.function)) * BYTES_PER_TET <= budget
+
+
+def _thin_feature_size(surface: Surface, h: float, floor: float, field: SizeField, budget: int) -> tuple[float, list]:
+    """Boundary size (h / 2**k, at least floor) giving two element layers across the thinnest
+    wall or gap found along the lattice rows of size h, and a note saying why."""
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    crossings = {d: rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
+    features = find_thin_features(frame, crossings, surface.vertices, faces, THIN_FACING)
+    if features.thickness.size == 0:
+        return h, []
+    i = int(np.argmin(features.thickness))
+    thickness, where = float(features.thickness[i]), features.points[i]
+    band = h
+    while band > thickness / 2 and band / 2 >= floor * (1 - 1e-9) and _fits(surface, field, band / 2, budget):
+        band /= 2
+    if band == h:
+        return h, []
+    what = "wall" if features.is_wall[i] else "gap"
+    return band, [f"boundary size {band:.4g} (requested {h:.4g}) for a {what} {thickness:.4g} thick near "
+                  f"({where[0]:.4g}, {where[1]:.4g}, {where[2]:.4g})"]
+
+
+def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
+             progress: Callable[[str], None] | None) -> tuple[MeshResult, str, str]:
+    """One meshing pass at the field's boundary size: (result, what the mesh lost or '', advice)."""
+    stages = _Stages(report, progress)
+    h = field.size
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
     if frame.levels > MAX_FRAME_LEVELS:
         raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
@@ -232,16 +317,14 @@ def mesh(
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
     lost = _losses(report)
+    advice = ""
     if lost:
         for d in range(EDGE_DIRECTIONS.shape[0]):
             if d not in crossings:
                 crossings[d] = rays.row_crossings(frame, snapped, faces, d)
-        advice = _thin_feature_advice(thin_features(frame, crossings, surface.vertices, faces), h)
-        if report.n_tets == 0:
-            raise ParoctError(f"no tets: the solid is thinner than size = {h:.4g} everywhere; {advice}")
-        report.warnings.append(f"{lost}; {advice}")
+        advice = _thin_feature_advice(find_thin_features(frame, crossings, surface.vertices, faces), h)
         stages.done("features")
-    return MeshResult(TetMesh(points, out_tets), report)
+    return MeshResult(TetMesh(points, out_tets), report), lost, advice
 
 
 #: Volume loss (relative) above which the mesh is said to have lost part of the solid.

@@ -80,14 +80,25 @@ def octant_lattice_anchors(keys: np.ndarray, frame: FatFrame) -> np.ndarray:
 
 
 _DROP, _LEAF, _SPLIT = 0, 1, 2
+#: Rules of _depth_first (a rule number, not a function argument: numba's cache cannot
+#: reliably store kernels specialised on first-class functions).
+_MEETS_BOX, _HAS_DEEPER_SEED = 0, 1
 
 
 @nb.njit(cache=True)
-def _depth_first(decide, args):
+def _decide(rule, key, lev, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels):
+    if rule == _MEETS_BOX:
+        return _meets_box(key, lev, box_lo, box_hi, frame_levels, level)
+    return _has_deeper_seed(key, lev, seed_keys, seed_levels)
+
+
+@nb.njit(cache=True)
+def _depth_first(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels):
     """Octants from a depth-first descent from the root, children in Morton order (so sorted).
 
-    decide(key, level, args) says what to do with each octant: _DROP it, keep it as a _LEAF,
-    or _SPLIT it into its eight children.  Returns (keys (N,) int64, levels (N,) int8).
+    The rule (_MEETS_BOX with the box arguments, _HAS_DEEPER_SEED with the seeds) says what
+    to do with each octant: _DROP it, keep it as a _LEAF, or _SPLIT it into its eight
+    children.  Returns (keys (N,) int64, levels (N,) int8).
     """
     out_keys = np.empty(1024, dtype=np.int64)
     out_levels = np.empty(1024, dtype=np.int8)
@@ -101,7 +112,7 @@ def _depth_first(decide, args):
         top -= 1
         key = stack_keys[top]
         lev = stack_levels[top]
-        action = decide(key, lev, args)
+        action = _decide(rule, key, lev, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels)
         if action == _SPLIT:
             step = 3 * (MAX_LEVEL - lev - 1)
             for c in range(7, -1, -1):
@@ -119,9 +130,8 @@ def _depth_first(decide, args):
 
 
 @nb.njit(cache=True)
-def _meets_box(key, lev, args):
+def _meets_box(key, lev, lo, hi, frame_levels, level):
     """Split down to ``level`` the octants whose parallelepiped meets the box (lattice-scaled space)."""
-    lo, hi, frame_levels, level = args
     shift = MAX_LEVEL - frame_levels
     ax, ay, az = morton_coords(key)
     ax >>= shift
@@ -148,7 +158,8 @@ def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, le
         raise ValueError(f"level = {level} is outside 0..{frame.levels}")
     lo = (np.asarray(box_min, dtype=np.float64) - frame.origin) / frame.h
     hi = (np.asarray(box_max, dtype=np.float64) - frame.origin) / frame.h
-    return _depth_first(_meets_box, (lo, hi, np.int64(frame.levels), np.int64(level)))
+    no_seeds = np.zeros(0, dtype=np.int64)
+    return _depth_first(_MEETS_BOX, lo, hi, np.int64(frame.levels), np.int64(level), no_seeds, no_seeds.astype(np.int8))
 
 
 @nb.njit(cache=True)
@@ -332,8 +343,7 @@ def _seed_range_max_level(keys, levels, lo_key, hi_key):
 
 
 @nb.njit(cache=True)
-def _has_deeper_seed(key, lev, args):
-    keys, levels = args
+def _has_deeper_seed(key, lev, keys, levels):
     return _SPLIT if _seed_range_max_level(keys, levels, key, octant_last_key(key, lev)) > lev else _LEAF
 
 
@@ -343,7 +353,9 @@ def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarra
     keys, levels: seed octants sorted by key (duplicates and overlaps allowed).  An octant is
     split iff a seed is a strict descendant of it.  Returns (keys (N,) int64, levels (N,) int8).
     """
-    return _depth_first(_has_deeper_seed, (np.asarray(keys, dtype=np.int64), np.asarray(levels, dtype=np.int8)))
+    no_box = np.zeros(3)
+    return _depth_first(_HAS_DEEPER_SEED, no_box, no_box, np.int64(0), np.int64(0),
+                        np.asarray(keys, dtype=np.int64), np.asarray(levels, dtype=np.int8))
 
 
 @nb.njit(cache=True)
