@@ -173,10 +173,10 @@ def mesh(
     max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
     a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
     evaluated at octant corners and centres (both are clamped to at least size).
-    thin_features: walls and gaps thinner than 2 * size make the boundary size smaller (by
-    halves, down to min_size, default size / 8) until two element layers span them, and the
-    mesh is refined again while it loses topology or more than 1 % of the volume; False keeps
-    size and only warns.  max_memory: bytes the run may use (default: the machine's available
+    thin_features: when the mesh loses topology (boundary components, genus) or more than 1 %
+    of the volume, the boundary size shrinks by halves (down to min_size, default size / 8) and
+    the solid is meshed again: first straight to two element layers across the thinnest wall
+    or gap found, then by halves while it still loses; False keeps size and only warns.  max_memory: bytes the run may use (default: the machine's available
     memory); a size that would need more is refused before any work.  progress: called with
     each stage's name when it ends.
     """
@@ -193,36 +193,22 @@ def mesh(
     if progress:
         progress("load")
 
-    band, notes, thin_seconds = h, [], 0.0
-    if thin_features and floor < h:
-        t = time.perf_counter()
-        band, notes = _thin_feature_size(surface, h, floor, field, budget)
-        thin_seconds = time.perf_counter() - t
-        if progress:
-            progress("features")
-    discarded = 0.0
+    band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
     while True:
         report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
-                            input_genus=surface.genus, input_components=surface.components)
-        report.stage_seconds["load"] = loaded
-        if thin_seconds:
-            report.stage_seconds["features"] = thin_seconds
-        t = time.perf_counter()
+                            input_genus=surface.genus, input_components=surface.components, stage_seconds=stage_seconds)
         attempt = size_field(band, field.max_size, field.regions, field.function)
-        result, lost, advice = _mesh_at(surface, attempt, report, progress)
-        finer = band / 2
-        if not (thin_features and lost and finer >= floor * (1 - 1e-9) and _fits(surface, attempt, finer, budget)):
+        result, lost, advice, finer = _mesh_at(surface, attempt, report, progress)
+        finer = max(min(finer, band / 2), floor)
+        if not (thin_features and lost and finer < band * (1 - 1e-9) and _fits(surface, attempt, finer, budget)):
             break
-        notes.append(f"refined the boundary from size {band:.4g} to {finer:.4g}: at {band:.4g} {lost}")
-        discarded += time.perf_counter() - t
+        notes.append(f"boundary size {band:.4g} -> {finer:.4g}: at {band:.4g} {lost}; {advice}")
         band = finer
-    if discarded:
-        report.stage_seconds["discarded"] = discarded
     report.notes = notes
     if lost:
         if report.n_tets == 0:
             raise ParoctError(f"no tets: the solid is thinner than size = {band:.4g} everywhere; {advice}")
-        floor_text = f"min_size = {floor:.4g} reached; " if thin_features and band / 2 < floor * (1 - 1e-9) else ""
+        floor_text = f"min_size = {floor:.4g} reached; " if thin_features and band <= floor * (1 + 1e-9) else ""
         report.warnings.append(f"{floor_text}{lost}; {advice}")
     return result
 
@@ -247,31 +233,11 @@ def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
     return estimate_tets(surface, size_field(band, field.max_size, field.regions, field.function)) * BYTES_PER_TET <= budget
 
 
-def _thin_feature_size(surface: Surface, h: float, floor: float, field: SizeField, budget: int) -> tuple[float, list]:
-    """Boundary size (h / 2**k, at least floor) giving two element layers across the thinnest
-    wall or gap found along the lattice rows of size h, and a note saying why."""
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
-    snapped = rays.snap_surface(frame, surface.vertices)
-    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    crossings = {d: rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
-    features = find_thin_features(frame, crossings, surface.vertices, faces, THIN_FACING)
-    if features.thickness.size == 0:
-        return h, []
-    i = int(np.argmin(features.thickness))
-    thickness, where = float(features.thickness[i]), features.points[i]
-    band = h
-    while band > thickness / 2 and band / 2 >= floor * (1 - 1e-9) and _fits(surface, field, band / 2, budget):
-        band /= 2
-    if band == h:
-        return h, []
-    what = "wall" if features.is_wall[i] else "gap"
-    return band, [f"boundary size {band:.4g} (requested {h:.4g}) for a {what} {thickness:.4g} thick near "
-                  f"({where[0]:.4g}, {where[1]:.4g}, {where[2]:.4g})"]
-
-
 def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
-             progress: Callable[[str], None] | None) -> tuple[MeshResult, str, str]:
-    """One meshing pass at the field's boundary size: (result, what the mesh lost or '', advice)."""
+             progress: Callable[[str], None] | None) -> tuple[MeshResult, str, str, float]:
+    """One meshing pass at the field's boundary size: (result, what the mesh lost or '', advice,
+    a boundary size h / 2**k giving two element layers across the thinnest wall or gap whose
+    sides face each other squarely (h if none or nothing lost))."""
     stages = _Stages(report, progress)
     h = field.size
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
@@ -317,14 +283,18 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
     lost = _losses(report)
-    advice = ""
+    advice, finer = "", h
     if lost:
         for d in range(EDGE_DIRECTIONS.shape[0]):
             if d not in crossings:
                 crossings[d] = rays.row_crossings(frame, snapped, faces, d)
         advice = _thin_feature_advice(find_thin_features(frame, crossings, surface.vertices, faces), h)
+        walls = find_thin_features(frame, crossings, surface.vertices, faces, THIN_FACING)
+        if walls.thickness.size:
+            while finer > walls.thickness.min() / 2:
+                finer /= 2
         stages.done("features")
-    return MeshResult(TetMesh(points, out_tets), report), lost, advice
+    return MeshResult(TetMesh(points, out_tets), report), lost, advice, finer
 
 
 #: Volume loss (relative) above which the mesh is said to have lost part of the solid.
