@@ -2,8 +2,9 @@
 
 from .errors import ParoctError
 from .mesher import MeshReport, MeshResult, TetMesh, mesh
+from .sizing import Box, Sphere
 from .surface import Surface, load_surface
 
 __version__ = "0.1.0"
 
-__all__ = ["ParoctError", "MeshReport", "MeshResult", "TetMesh", "Surface", "load_surface", "mesh", "__version__"]
+__all__ = ["Box", "MeshReport", "MeshResult", "ParoctError", "Sphere", "Surface", "TetMesh", "__version__", "load_surface", "mesh"]
