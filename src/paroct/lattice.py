@@ -76,13 +76,14 @@ def _find(table_keys, table_vals, mask, key, slot):
 
 
 @nb.njit(cache=True)
-def _number_vertices(anchors, sides, box_lo, box_dims, split_offsets, face_edges):
+def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, face_edges):
     """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
     (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
     lattice coordinates (V, 3) of the vertices.
 
-    Corners are numbered first, in leaf order; then, for each coarse leaf in order, the
-    centres of its faces with a split cube edge (the eager face-centre rule).
+    The prefix points (P, 3) get ids 0..P-1; then corners are numbered in leaf order; then,
+    for each coarse leaf in order, the centres of its faces with a split cube edge (the eager
+    face-centre rule).
     box_dims[0] > 0: every vertex lies in the box box_lo + [0, box_dims), and its linear
     index there is a collision-free slot; otherwise slots come from _slot and the table grows.
     """
@@ -94,15 +95,29 @@ def _number_vertices(anchors, sides, box_lo, box_dims, split_offsets, face_edges
         mask = np.int64(-1)
     else:
         bits = 4
-        while (np.int64(1) << bits) < 4 * n + 16:
+        while (np.int64(1) << bits) < 4 * n + prefix.shape[0] + 16:
             bits += 1
         size = np.int64(1) << bits
         mask = size - 1
     table_keys = np.full(size, _EMPTY, dtype=np.int64)
     table_vals = np.empty(size, dtype=np.int32)
     corner_ids = np.empty((n, 8), dtype=np.int32)
-    coords = np.empty((4 * n + 16, 3), dtype=np.int64)
+    coords = np.empty((4 * n + prefix.shape[0] + 16, 3), dtype=np.int64)
     count = 0
+    for i in range(prefix.shape[0]):
+        x = prefix[i, 0]
+        y = prefix[i, 1]
+        z = prefix[i, 2]
+        key = morton_key(x, y, z)
+        _, new = _insert(table_keys, table_vals, mask, key, _first_slot(x, y, z, key, dense, box_lo, box_dims, bits), count)
+        if new:
+            coords[count, 0] = x
+            coords[count, 1] = y
+            coords[count, 2] = z
+            count += 1
+            if not dense and 2 * count > table_keys.shape[0]:
+                table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
+                mask = (np.int64(1) << bits) - 1
     for i in range(n):
         for c in range(8):
             x = anchors[i, 0] + sides[i] * CUBE_CORNERS[c, 0]
@@ -260,13 +275,15 @@ class LeafVertices:
     coords: np.ndarray
 
 
-def number_vertices(anchors: np.ndarray, sides: np.ndarray) -> LeafVertices:
+def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray | None = None) -> LeafVertices:
     """Global vertex ids of leaf corners and of the transition points of coarse leaves.
 
     anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides
     (powers of two).  The leaves must form a 2:1-balanced linear octree (or part of one),
     sorted by Morton key: a cube-edge midpoint of a leaf is a vertex iff it is a corner of
     another leaf, and face centres follow the eager rule (paroct.transitions).
+    prefix: (P, 3) distinct leaf corners numbered first, as 0..P-1, so that arrays over an
+    earlier numbering of them stay valid.
     """
     anchors = np.ascontiguousarray(anchors, dtype=np.int64)
     sides = np.ascontiguousarray(sides, dtype=np.int64)
@@ -279,7 +296,8 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray) -> LeafVertices:
         box_dims = (anchors + sides[:, None]).max(axis=0) + 1 - box_lo
         if np.prod(box_dims.astype(np.float64)) > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
             box_dims = np.zeros(3, dtype=np.int64)
-    return LeafVertices(*_number_vertices(anchors, sides, box_lo, box_dims, SPLIT_POINT_OFFSETS, FACE_EDGES))
+    prefix = np.zeros((0, 3), dtype=np.int64) if prefix is None else np.ascontiguousarray(prefix, dtype=np.int64)
+    return LeafVertices(*_number_vertices(anchors, sides, prefix, box_lo, box_dims, SPLIT_POINT_OFFSETS, FACE_EDGES))
 
 
 def graded_tets(vertices: LeafVertices, marked: np.ndarray | None = None) -> np.ndarray:

@@ -249,23 +249,27 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-    keys, levels = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
+    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = tuple(int(v) for v in np.unique(frame.levels - levels))
     stages.done("octree")
 
-    vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)))
+    # The band's vertices come first, so its classes, cut edges and warps keep their ids.
+    vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)),
+                               prefix=band.coords)
     coords = vertices.coords
-    inside = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords) > 0
+    n_band = band.coords.shape[0]
+    inside = np.empty(coords.shape[0], dtype=bool)
+    inside[:n_band] = band.inside
+    inside[n_band:] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords[n_band:]) > 0
     stages.done("classify")
 
     tets = graded_tets(vertices, inside)  # tets with no inside vertex stay outside
     stages.done("emit")
 
-    cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report)
-    stages.done("cut")
-
-    targets = warp_targets(cuts, coords.shape[0], h)
+    cuts = band.cuts
+    targets = np.full(coords.shape[0], -1, dtype=np.int64)
+    targets[:n_band] = band.targets
     points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
     stages.done("stuff")
 
@@ -328,10 +332,22 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
     return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 
+@dataclass(frozen=True)
+class BandStuffing:
+    """The finest band's vertices and what stuffing needs of them, computed while building the
+    octree: coords (P, 3) int64 lattice coordinates (the corners of the cut cells), inside (P,)
+    classes, cuts of their cut edges and warp targets (P,) (stuffing.warp_targets)."""
+
+    coords: np.ndarray
+    inside: np.ndarray
+    cuts: CutEdges
+    targets: np.ndarray
+
+
 def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Surface, field: SizeField,
-                  report: MeshReport) -> tuple[np.ndarray, np.ndarray]:
+                  report: MeshReport) -> tuple[np.ndarray, np.ndarray, BandStuffing]:
     """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may hold
-    inside tets.
+    inside tets, and the stuffing data of the band.
 
     The finest level holds the *band*: every cell with corners of both classes (cut cells: all
     tets that stuffing cuts) and every cell with a corner that stuffing warps.  So stuffing only
@@ -344,17 +360,17 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     finest = frame.levels
     x_crossings = crossings[X_AXIS_DIRECTION]
     met = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
-    anchors = octant_lattice_anchors(met, frame)
-    vertices = number_vertices(anchors, np.ones(met.shape[0], dtype=np.int64))
-    inside = rays.winding_numbers(x_crossings, vertices.coords) > 0
-    corner_inside = inside[vertices.corner_ids]
-    is_cut = corner_inside.any(axis=1) & ~corner_inside.all(axis=1)
-    cut_tets = graded_tets(vertices)[np.repeat(is_cut, 6)]
-    cuts = cut_edges(frame, snapped, faces, vertices.coords, cut_tets, inside, crossings, report)
-    warped = vertices.coords[warp_targets(cuts, vertices.coords.shape[0], frame.h) >= 0]
+    corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
+    corner_inside = (rays.winding_numbers(x_crossings, corners.coords) > 0)[corners.corner_ids]
+    cut_keys = met[corner_inside.any(axis=1) & ~corner_inside.all(axis=1)]
+    cut_cells = number_vertices(octant_lattice_anchors(cut_keys, frame), np.ones(cut_keys.shape[0], dtype=np.int64))
+    inside = rays.winding_numbers(x_crossings, cut_cells.coords) > 0
+    cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings, report)
+    targets = warp_targets(cuts, cut_cells.coords.shape[0], frame.h)
+    warped = cut_cells.coords[targets >= 0]
     around = (warped[:, None, :] - CUBE_CORNERS[None, :, :]).reshape(-1, 3)  # the 8 cells at each warped vertex
     around = around[(around >= 0).all(axis=1)]
-    band = np.unique(np.concatenate([met[is_cut], morton_keys(around << (MAX_LEVEL - finest))]))
+    band = np.unique(np.concatenate([cut_keys, morton_keys(around << (MAX_LEVEL - finest))]))
     seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field)
     keys, levels = balance(np.concatenate([band, seed_keys]),
                            np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
@@ -363,8 +379,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     in_band[fine] = np.isin(keys[fine], band, assume_unique=True)
     keep = in_band.copy()
     keep[~in_band] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~in_band], frame)) > 0
-    report.unresolved_cuts = 0  # counted again, once, when the final mesh is cut
-    return keys[keep], levels[keep]
+    return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
 
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:

@@ -264,8 +264,9 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
         c0 = np.empty(3, dtype=np.int64)
         c1 = np.empty(3, dtype=np.int64)
         for i in range(3):
-            c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) + margin) / side - 1e-9)) - 1
-            c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) - margin) / side + 1e-9)) + 1
+            # Cells whose widened box meets the triangle's box (exact in floats: side is a power of two).
+            c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) - 2 * margin) / side))
+            c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) + 2 * margin) / side))
         for z in range(max(c0[2], 0), c1[2] + 1):
             for y in range(max(c0[1], 0), c1[1] + 1):
                 for x in range(max(c0[0], 0), c1[0] + 1):
