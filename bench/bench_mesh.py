@@ -45,7 +45,8 @@ def main(argv=None) -> int:
     stages = ["octree", "classify", "emit", "stuff", "repair", "quality"]
     head = (f"{'model':12s} {'div':>4s} {'tets':>9s} {'verts':>8s} {'sec':>6s} {'Mtet/s':>6s} "
             + " ".join(f"{s[:6]:>6s}" for s in stages)
-            + f" {'mindih':>6s} {'maxdih':>6s} {'min3rR':>6s} {'volerr%':>7s} {'haus/d':>8s}  note")
+            + f" {'mindih':>6s} {'maxdih':>6s} {'min3rR':>6s} {'int.dih':>13s} {'lv':>2s} {'fat%':>4s} {'size/req':>8s}"
+            + f" {'volerr%':>7s} {'topo':>4s} {'haus/d':>8s} {'check':>5s}  note")
     print(head)
     finest = max(args.divisions)
     rates = []
@@ -63,14 +64,18 @@ def main(argv=None) -> int:
             rate = rep.n_tets / sec / 1e6
             if div == finest:
                 rates.append(rate)
-            haus = float("nan")
+            haus, valid = float("nan"), "-"
             if check_mesh is not None:
-                haus = check_mesh(result.mesh.points, result.mesh.tets, surface).hausdorff
+                checked = check_mesh(result.mesh.points, result.mesh.tets, surface)
+                haus, valid = checked.hausdorff, "ok" if checked.ok else "BAD"
             note = "warn: " + rep.warnings[0][:60] if rep.warnings else ""
+            topo = "same" if (rep.boundary_components, rep.boundary_genus) == (rep.input_components, rep.input_genus) else "DIFF"
             print(f"{f.stem:12s} {div:4.0f} {rep.n_tets:9d} {rep.n_vertices:8d} {sec:6.2f} {rate:6.2f} "
                   + " ".join(f"{rep.stage_seconds.get(s, 0.0):6.3f}" for s in stages)
                   + f" {rep.min_dihedral:6.2f} {rep.max_dihedral:6.2f} {rep.min_radius_ratio:6.3f}"
-                  f" {100 * rep.volume_error:7.2f} {haus:8.2e}  {note}")
+                  f" {rep.interior_min_dihedral:6.2f}-{rep.interior_max_dihedral:6.2f} {len(rep.leaf_levels):2d}"
+                  f" {100 * rep.fat_fraction:4.0f} {rep.size / rep.requested_size:8.4f}"
+                  f" {100 * rep.volume_error:7.2f} {topo:>4s} {haus:8.2e} {valid:>5s}  {note}")
             sys.stdout.flush()
     if rates:
         print(f"\nthroughput at diag/{finest:.0f}: median {np.median(rates):.2f} M tets/s, min {min(rates):.2f}, max {max(rates):.2f}"
