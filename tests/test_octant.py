@@ -67,3 +67,12 @@ def test_tree_predicates_on_uniform_and_broken_trees():
     keep = linearize(k2, l2)
     assert keep[0] == False and keep[1:].all()  # noqa: E712
     assert not tree_is_sorted(keys[::-1], levels[::-1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sorted_unique_matches_numpy_unique(seed):
+    rng = np.random.default_rng(seed)
+    values = rng.integers(-50, 50, size=int(rng.integers(0, 300)))
+    assert np.array_equal(octant.sorted_unique(values), np.unique(values))
+    keys = octant.morton_keys(rng.integers(0, 1 << 10, size=(200, 3)))
+    assert np.array_equal(octant.sorted_unique(np.concatenate([keys, keys[::3]])), np.unique(keys))

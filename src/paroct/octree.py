@@ -24,6 +24,7 @@ from .octant import (
     octant_len,
     octant_overlaps,
     octant_parent_key,
+    sorted_unique,
 )
 
 
@@ -197,7 +198,7 @@ def touched_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     hi = tri.max(axis=1) >> snap_bits
     hi += (tri.max(axis=1) & ((1 << snap_bits) - 1)) == 0  # a max exactly on a lattice plane touches the next cell too
     keys = _touched_cell_keys(lo, hi, frame.levels - level)
-    return np.unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+    return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
 
 
 @nb.njit(cache=True, inline="always")
@@ -290,7 +291,7 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     listed contains no surface point, so all its points have one inside/outside class.
     """
     keys = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
-    return np.unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+    return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
 
 
 @nb.njit(cache=True)
@@ -316,7 +317,7 @@ def _neighbour_keys(keys, level):
 
 def with_ring(keys: np.ndarray, level: int) -> np.ndarray:
     """Sorted keys of the octants of ``level`` in ``keys`` or touching one of them (face, edge or corner)."""
-    return np.unique(_neighbour_keys(np.asarray(keys, dtype=np.int64), level))
+    return sorted_unique(_neighbour_keys(np.asarray(keys, dtype=np.int64), level))
 
 
 def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndarray:
@@ -412,7 +413,7 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
     seeds_k, seeds_l = [keys], [levels]
     current_k, current_l = keys, levels
     for level in range(int(levels.max(initial=0)), 1, -1):
-        parents = np.unique(_insulation_parents(np.unique(_parent_keys(current_k, current_l, level)), level))
+        parents = sorted_unique(_insulation_parents(sorted_unique(_parent_keys(current_k, current_l, level)), level))
         seeds_k.append(parents)
         seeds_l.append(np.full(parents.shape[0], level - 1, dtype=np.int8))
         current_k = np.concatenate([current_k, parents])

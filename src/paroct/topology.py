@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from .octant import sorted_unique
+
 #: Face k of a positively oriented tet is opposite vertex k, ordered to face outward.
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 
@@ -266,7 +268,7 @@ def surface_topology(faces: np.ndarray, n_vertices: int) -> SurfaceTopology:
         return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
     n_edges, bad_edges = _surface_edges(faces, n_vertices)
     bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
-    used = np.unique(faces)
+    used = sorted_unique(faces)
     components = _components(faces, n_vertices)
     euler = used.shape[0] - n_edges + faces.shape[0]
     return SurfaceTopology(faces.shape[0], used.shape[0], n_edges, bad_edges, bad_vertices, components, euler)
