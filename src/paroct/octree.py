@@ -258,6 +258,7 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
     m = 0
     tri = np.empty((3, 3))
     lo = np.empty(3)
+    cell = np.empty(3, dtype=np.int64)
     for f in range(faces.shape[0]):
         for k in range(3):
             for i in range(3):
@@ -268,17 +269,46 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
             # Cells whose widened box meets the triangle's box (exact in floats: side is a power of two).
             c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) - 2 * margin) / side))
             c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) + 2 * margin) / side))
-        for z in range(max(c0[2], 0), c1[2] + 1):
-            for y in range(max(c0[1], 0), c1[1] + 1):
-                for x in range(max(c0[0], 0), c1[0] + 1):
-                    lo[0] = x * side - margin
-                    lo[1] = y * side - margin
-                    lo[2] = z * side - margin
+        # Walk the columns along the axis k where the triangle's plane is steepest: over a
+        # column the plane spans a short range of k (|n_k| is the largest normal component),
+        # so a slanted triangle costs O(area) cells, not O(box volume).
+        nx = (tri[1, 1] - tri[0, 1]) * (tri[2, 2] - tri[0, 2]) - (tri[1, 2] - tri[0, 2]) * (tri[2, 1] - tri[0, 1])
+        ny = (tri[1, 2] - tri[0, 2]) * (tri[2, 0] - tri[0, 0]) - (tri[1, 0] - tri[0, 0]) * (tri[2, 2] - tri[0, 2])
+        nz = (tri[1, 0] - tri[0, 0]) * (tri[2, 1] - tri[0, 1]) - (tri[1, 1] - tri[0, 1]) * (tri[2, 0] - tri[0, 0])
+        normal = (nx, ny, nz)
+        k = 0
+        if abs(ny) > abs(normal[k]):
+            k = 1
+        if abs(nz) > abs(normal[k]):
+            k = 2
+        a, b = (k + 1) % 3, (k + 2) % 3
+        steep = abs(normal[k]) > 0.0
+        offset = normal[0] * tri[0, 0] + normal[1] * tri[0, 1] + normal[2] * tri[0, 2]
+        for ca in range(max(c0[a], 0), c1[a] + 1):
+            for cb in range(max(c0[b], 0), c1[b] + 1):
+                k0, k1 = max(c0[k], 0), c1[k]
+                if steep:
+                    zmin, zmax = np.inf, -np.inf
+                    for da in range(2):
+                        for db in range(2):
+                            pa = (ca + da) * side + (2 * da - 1) * 2 * margin
+                            pb = (cb + db) * side + (2 * db - 1) * 2 * margin
+                            z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
+                            zmin = min(zmin, z)
+                            zmax = max(zmax, z)
+                    k0 = max(k0, np.int64(np.floor((zmin - 2 * margin) / side)))
+                    k1 = min(k1, np.int64(np.floor((zmax + 2 * margin) / side)))
+                for ck in range(k0, k1 + 1):
+                    cell[a] = ca
+                    cell[b] = cb
+                    cell[k] = ck
+                    for i in range(3):
+                        lo[i] = cell[i] * side - margin
                     if not triangle_meets_cube(tri, lo, side + 2 * margin):
                         continue
                     if m == out.shape[0]:
                         out = np.concatenate((out, np.empty(m, dtype=np.int64)))
-                    out[m] = morton_key(x << cell_bits, y << cell_bits, z << cell_bits)
+                    out[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
                     m += 1
     return out[:m].copy()
 
