@@ -105,7 +105,9 @@ class TetQuality:
 def tet_quality(points: np.ndarray, tets: np.ndarray) -> TetQuality:
     """Quality of every tet.  points: (N, 3) float64; tets: (M, 4) integer vertex indices."""
     points = np.ascontiguousarray(points, dtype=np.float64)
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    tets = np.ascontiguousarray(tets)
+    if tets.dtype not in (np.int32, np.int64):  # the kernels are compiled for these two
+        tets = tets.astype(np.int64)
     m = tets.shape[0]
     out = TetQuality(np.empty(m), np.empty(m), np.empty(m), np.empty(m))
     if m:
