@@ -3,6 +3,7 @@
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import manifold3d
 import meshio
@@ -14,6 +15,8 @@ import paroct.mesher
 from paroct.cli import main
 from paroct.io import write_mesh
 from paroct.lattice import leaf_tets
+
+DATA = Path(__file__).resolve().parent.parent / "data"
 
 BOX = (1.0, 0.8, 0.6)
 BOX_ROTATION = (10.0, 20.0, 30.0)
@@ -173,6 +176,11 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", s, "--max-memory", "0"], "--max-memory 0"),
         (lambda t, s: ["mesh", s, "--size", "1e-4", "--max-memory", "1"], "GiB"),
         (lambda t, s: ["mesh", s, "-o", t / "out.xyz"], "unknown mesh format"),
+        (lambda t, s: ["mesh", s, "--max-size", "1e-9"], "max_size = 1e-09 must be at least size"),
+        (lambda t, s: ["mesh", s, "--max-size", "2", "--uniform"], "not allowed with"),
+        (lambda t, s: ["mesh", s, "--refine-sphere", "0", "0", "0", "1", "-1"], "region size = -1"),
+        (lambda t, s: ["mesh", s, "--refine-box", "1", "1", "1", "0", "0", "0", "0.1"], "is not below"),
+        (lambda t, s: ["mesh", s, "--min-size", "0"], "min_size = 0"),
         (lambda t, s: ["mesh"], "required: SURFACE"),
         (lambda t, s: [], "choose a command"),
         (lambda t, s: ["frobnicate"], "invalid choice"),
@@ -232,3 +240,17 @@ def test_python_dash_m_paroct(tmp_path):
     done = subprocess.run([sys.executable, "-m", "paroct", "mesh", "open.stl"], capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 2 and done.stderr.startswith("paroct: error: open.stl: open surface")
     assert done.stderr.count("\n") == 1, done.stderr
+
+
+def test_grading_options_change_the_mesh(tmp_path, capsys):
+    stl = DATA / "bunny.stl"
+    counts = {}
+    for name, extra in [("graded", []), ("uniform", ["--uniform"]), ("coarse", ["--max-size", "1"]),
+                        ("sphere", ["--max-size", "1", "--refine-sphere", "-0.02", "0.1", "0", "0.03", "0.001"])]:
+        rc, out, err = _run(capsys, "mesh", stl, "--divisions", "60", "-o", tmp_path / f"{name}.vtu", *extra)
+        assert rc == 0, err
+        counts[name] = int(re.search(r"(\d+) tets", out).group(1))
+        levels = int(re.search(r"\((\d+) leaf levels\)", out).group(1))
+        assert (levels == 1) == (name == "uniform")
+    assert counts["uniform"] > counts["graded"] > 0
+    assert counts["sphere"] > counts["coarse"]
