@@ -62,22 +62,39 @@ def pair_slot(table_a, table_b, bits, a, b):
 
 @nb.njit(cache=True)
 def match_faces(tets):
-    """Neighbour across every tet face.
+    """Neighbour across every tet face.  Vertex ids must be below 2**31.
 
     Returns (neighbour (M, 4) int64: the tet sharing face k of tet t, or -1 on the boundary;
     overloaded: number of faces found in more than two tets; same_side: number of faces
     whose two tets order them the same way, i.e. lie on the same side, inverted).
     """
     m = tets.shape[0]
-    bits = 4
-    while (np.int64(1) << bits) < 8 * m + 16:
-        bits += 1
-    size = np.int64(1) << bits
-    mask = size - 1
-    ta = np.full(size, -1, dtype=np.int64)
-    tb = np.empty(size, dtype=np.int64)
-    tc = np.empty(size, dtype=np.int64)
-    owner = np.empty(size, dtype=np.int64)  # tet * 4 + face of the first tet holding it
+    size = 4 * m + 16  # at most ~2m distinct faces: load <= 1/2
+    # One row per slot (a * 2**32 + b, c, tet * 4 + face of the first tet holding it; a < b < c
+    # the sorted vertex ids): a probe touches one cache line, not one per array.
+    table = np.empty((size, 3), dtype=np.int64)
+    table[:, 0] = -1
+    # Faces start at a slot near stride * (smallest vertex): vertex ids are spatially coherent
+    # and tets come in spatial order, so the probes of nearby tets share cache lines.
+    n_vertices = 1
+    for t in range(m):
+        for k in range(4):
+            n_vertices = max(n_vertices, tets[t, k] + 1)
+    # A sub-mesh of a bigger mesh uses few of the ids below n_vertices: rank the used ids
+    # (order kept, so still coherent) to start slots from.  A few faces share a smallest
+    # vertex; with fewer than 8 slots per vertex their runs would merge, so then hash the
+    # whole triple instead.
+    rank = np.zeros(n_vertices, dtype=np.int64)
+    for t in range(m):
+        for k in range(4):
+            rank[tets[t, k]] = 1
+    used = 0
+    for v in range(n_vertices):
+        flag = rank[v]
+        rank[v] = used
+        used += flag
+    stride = size // max(used, 1)
+    local = stride >= 8
     neighbour = np.full((m, 4), -1, dtype=np.int64)
     overloaded = 0
     same_side = 0
@@ -87,16 +104,19 @@ def match_faces(tets):
             v1 = tets[t, TET_FACES[k, 1]]
             v2 = tets[t, TET_FACES[k, 2]]
             a, b, c = _sort3(v0, v1, v2)
-            s = _hash3(a, b, c, bits)
+            ab = (np.int64(a) << 32) | np.int64(b)
+            if local:
+                s = (rank[a] * stride + _hash3(b, c, 0, 20) % stride) % size
+            else:
+                s = _hash3(a, b, c, 40) % size
             while True:
-                if ta[s] == -1:
-                    ta[s] = a
-                    tb[s] = b
-                    tc[s] = c
-                    owner[s] = t * 4 + k
+                if table[s, 0] == -1:
+                    table[s, 0] = ab
+                    table[s, 1] = c
+                    table[s, 2] = t * 4 + k
                     break
-                if ta[s] == a and tb[s] == b and tc[s] == c:
-                    o = owner[s]
+                if table[s, 0] == ab and table[s, 1] == c:
+                    o = table[s, 2]
                     if o < 0:
                         overloaded += 1
                         break
@@ -104,7 +124,7 @@ def match_faces(tets):
                     ok = o % 4
                     if neighbour[ot, ok] != -1:
                         overloaded += 1
-                        owner[s] = -1
+                        table[s, 2] = -1
                         break
                     neighbour[ot, ok] = t
                     neighbour[t, k] = ot
@@ -115,7 +135,9 @@ def match_faces(tets):
                     if (w0 == v0 and w1 == v1) or (w1 == v0 and w2 == v1) or (w2 == v0 and w0 == v1):
                         same_side += 1
                     break
-                s = (s + 1) & mask
+                s += 1
+                if s == size:
+                    s = 0
     return neighbour, overloaded, same_side
 
 
