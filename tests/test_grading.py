@@ -6,7 +6,6 @@ import manifold3d
 import numpy as np
 import pytest
 
-from .naive import cells_meeting_triangles
 from paroct import lattice, octant
 from paroct.errors import ParoctError
 from paroct.frame import LATTICE_TO_SPACE, fat_frame
@@ -24,6 +23,8 @@ from paroct.transitions import (
     SPLIT_POINT_OFFSETS,
     TEMPLATES,
 )
+
+from .naive import cells_meeting_triangles
 
 FAT_RATIO = 3 / np.sqrt(10)
 ML = octant.MAX_LEVEL

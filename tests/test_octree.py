@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 
 from paroct import octant
-from paroct.octree import balance, complete_from_seeds, tree_is_balanced, tree_is_complete, tree_is_linear
+from paroct.octree import (
+    balance,
+    complete_from_seeds,
+    tree_is_balanced,
+    tree_is_complete,
+    tree_is_linear,
+)
 
 ML = octant.MAX_LEVEL
 
