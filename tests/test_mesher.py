@@ -202,3 +202,23 @@ def test_quads_are_split_into_triangles(tmp_path):
     meshio.write(tmp_path / "box.obj", meshio.Mesh(v, [("quad", quads)]))
     surface = load_surface(tmp_path / "box.obj")
     assert surface.volume == pytest.approx(box.volume()) and surface.faces.shape == (12, 3)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_summary_reduces_tet_quality_exactly(seed):
+    from paroct.quality import summarize
+
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(60, 3))
+    tets = np.array([rng.choice(60, 4, replace=False) for _ in range(500)], dtype=np.int32)
+    core = rng.random(60) < 0.7
+    q = tet_quality(points, tets)
+    fat_ratio = float(q.radius_ratio[7])
+    s = summarize(points, tets, core, fat_ratio)
+    assert s.min_dihedral == q.min_dihedral.min() and s.max_dihedral == q.max_dihedral.max()
+    assert s.min_radius_ratio == q.radius_ratio.min()
+    assert s.volume == pytest.approx(q.volume.sum(), rel=1e-12, abs=1e-12)
+    interior = core[tets].all(axis=1)
+    assert s.interior_min_dihedral == q.min_dihedral[interior].min()
+    assert s.interior_max_dihedral == q.max_dihedral[interior].max()
+    assert s.n_fat == int((np.abs(q.radius_ratio - fat_ratio) < 1e-9).sum())

@@ -21,7 +21,7 @@ from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fa
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .octant import MAX_LEVEL, morton_keys, sorted_unique
 from .octree import balance, octant_lattice_anchors, surface_cells
-from .quality import tet_quality
+from .quality import summarize
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
@@ -292,6 +292,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
 
     _measure(points, out_tets, core, faces_out, report)
     points, out_tets = _compact(points, out_tets)
+    report.n_vertices = int(points.shape[0])
     stages.done("quality")
     if report.unresolved_cuts:
         report.warnings.append(
@@ -446,21 +447,16 @@ def _measure(points, tets, core, faces, report: MeshReport) -> None:
     """Quality, volume and boundary topology (faces: the boundary).  Tets with all four vertices
     core (unwarped inside lattice vertices) are lattice tets the boundary does not touch: their
     extreme dihedral angles are reported apart (they must stay in [30, 135] degrees)."""
-    q = tet_quality(points, tets)
+    summary = summarize(points, tets, core, FAT_RADIUS_RATIO)
     report.n_tets = int(tets.shape[0])
-    used = np.zeros(points.shape[0], dtype=bool)
-    used[tets.ravel()] = True
-    report.n_vertices = int(used.sum())
     if tets.shape[0]:
-        report.min_dihedral = float(q.min_dihedral.min())
-        report.max_dihedral = float(q.max_dihedral.max())
-        report.min_radius_ratio = float(q.radius_ratio.min())
-        report.fat_fraction = float(np.mean(np.abs(q.radius_ratio - FAT_RADIUS_RATIO) < 1e-9))
-        interior = core[tets].all(axis=1)
-        if interior.any():
-            report.interior_min_dihedral = float(q.min_dihedral[interior].min())
-            report.interior_max_dihedral = float(q.max_dihedral[interior].max())
-    report.mesh_volume = float(q.volume.sum())
+        report.min_dihedral = summary.min_dihedral
+        report.max_dihedral = summary.max_dihedral
+        report.min_radius_ratio = summary.min_radius_ratio
+        report.fat_fraction = summary.n_fat / tets.shape[0]
+        report.interior_min_dihedral = summary.interior_min_dihedral
+        report.interior_max_dihedral = summary.interior_max_dihedral
+    report.mesh_volume = summary.volume
     topo = surface_topology(faces, points.shape[0])
     report.boundary_genus = topo.genus
     report.boundary_components = topo.components

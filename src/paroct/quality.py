@@ -122,3 +122,78 @@ def tet_dihedral_angles(points, tets):
     for t in range(tets.shape[0]):
         _measure_tet(points, tets, t, out[t])
     return out
+
+
+#: Number of chunks a summary is reduced over (each thread owns whole chunks).
+_SUMMARY_CHUNKS = 64
+
+
+@nb.njit(cache=True, parallel=True)
+def _summarize(points, tets, core, fat_ratio, partial, fat_count):
+    """Per-chunk extremes into partial (chunks, 7): min dihedral, max dihedral, min 3r/R,
+    volume sum, min and max dihedral of tets with four core vertices, and (count) fat tets."""
+    m = tets.shape[0]
+    n_chunks = partial.shape[0]
+    for c in nb.prange(n_chunks):
+        angles = np.empty(6)
+        lo = m * c // n_chunks
+        hi = m * (c + 1) // n_chunks
+        mn, mx, rmin, vsum, imn, imx = 180.0, 0.0, np.inf, 0.0, 180.0, 0.0
+        fat = 0
+        for t in range(lo, hi):
+            vol, ratio = _measure_tet(points, tets, t, angles)
+            a_min, a_max = angles.min(), angles.max()
+            if vol <= 0.0:
+                a_min, a_max = 0.0, 180.0
+            mn = min(mn, a_min)
+            mx = max(mx, a_max)
+            rmin = min(rmin, ratio)
+            vsum += vol
+            if abs(ratio - fat_ratio) < 1e-9:
+                fat += 1
+            if core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]]:
+                imn = min(imn, a_min)
+                imx = max(imx, a_max)
+        partial[c, 0] = mn
+        partial[c, 1] = mx
+        partial[c, 2] = rmin
+        partial[c, 3] = vsum
+        partial[c, 4] = imn
+        partial[c, 5] = imx
+        fat_count[c] = fat
+
+
+@dataclass(frozen=True)
+class TetSummary:
+    """Extremes over a mesh: dihedral angles (degrees), 3r/R, total signed volume, the
+    dihedral range of the tets with four ``core`` vertices (nan if none) and how many tets
+    have 3r/R within 1e-9 of ``fat_ratio``."""
+
+    min_dihedral: float
+    max_dihedral: float
+    min_radius_ratio: float
+    volume: float
+    interior_min_dihedral: float
+    interior_max_dihedral: float
+    n_fat: int
+
+
+def summarize(points: np.ndarray, tets: np.ndarray, core: np.ndarray, fat_ratio: float) -> TetSummary:
+    """One parallel pass of tet_quality's measures, reduced (no per-tet arrays).
+    points: (N, 3) float64; tets: (M, 4) int; core: (N,) bool."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    tets = np.ascontiguousarray(tets)
+    if tets.dtype not in (np.int32, np.int64):
+        tets = tets.astype(np.int64)
+    n_chunks = max(1, min(_SUMMARY_CHUNKS, tets.shape[0]))
+    partial = np.empty((n_chunks, 6))
+    fat_count = np.zeros(n_chunks, dtype=np.int64)
+    if tets.shape[0] == 0:
+        nan = float("nan")
+        return TetSummary(nan, nan, nan, 0.0, nan, nan, 0)
+    _summarize(points, tets, np.ascontiguousarray(core, dtype=np.bool_), float(fat_ratio), partial, fat_count)
+    imn, imx = float(partial[:, 4].min()), float(partial[:, 5].max())
+    if imn > imx:  # no tet had four core vertices
+        imn = imx = float("nan")
+    return TetSummary(float(partial[:, 0].min()), float(partial[:, 1].max()), float(partial[:, 2].min()),
+                      float(partial[:, 3].sum()), imn, imx, int(fat_count.sum()))
