@@ -152,3 +152,27 @@ def cells_meeting_triangles(tris: np.ndarray, side: float, n_cells: int) -> set[
                     if triangle_meets_cube(tri, np.array([i, j, k]) * side, side):
                         out.add((i, j, k))
     return out
+
+
+def match_faces(tets: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Face neighbours by a dict of sorted vertex triples (see topology.match_faces)."""
+    faces_of = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]
+    seen: dict = {}
+    neighbour = -np.ones((len(tets), 4), dtype=np.int64)
+    overloaded = same_side = 0
+    for t, tet in enumerate(tets):
+        for k, f in enumerate(faces_of):
+            face = [int(tet[i]) for i in f]
+            key = tuple(sorted(face))
+            if key not in seen:
+                seen[key] = (t, k, face)
+                continue
+            ot, ok, other = seen[key]
+            if ot < 0 or neighbour[ot, ok] != -1:
+                overloaded += 1
+                seen[key] = (-1, -1, other)
+                continue
+            neighbour[ot, ok], neighbour[t, k] = t, ot
+            rotations = [other, other[1:] + other[:1], other[2:] + other[:2]]
+            same_side += face in rotations
+    return neighbour, overloaded, same_side

@@ -222,3 +222,22 @@ def test_summary_reduces_tet_quality_exactly(seed):
     assert s.interior_min_dihedral == q.min_dihedral[interior].min()
     assert s.interior_max_dihedral == q.max_dihedral[interior].max()
     assert s.n_fat == int((np.abs(q.radius_ratio - fat_ratio) < 1e-9).sum())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_match_faces_matches_a_dictionary(seed):
+    from . import naive
+
+    rng = np.random.default_rng(seed)
+    # A lattice block (every interior face twice), shuffled, with a few tets repeated (overloaded
+    # faces) or flipped (same-side faces), and sparse vertex ids.
+    coords, tets = leaf_tets(np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), -1).reshape(-1, 3),
+                             np.ones(27, dtype=np.int64))
+    tets = tets[rng.permutation(len(tets))].astype(np.int64)
+    extra = tets[rng.choice(len(tets), 5)]
+    flipped = tets[rng.choice(len(tets), 5)][:, [1, 0, 2, 3]]
+    tets = np.vstack([tets, extra, flipped]) * int(rng.integers(1, 7))
+    got = match_faces(tets)
+    want = naive.match_faces(tets)
+    assert got[1] == want[1] and got[2] == want[2]
+    assert np.array_equal(got[0], want[0])

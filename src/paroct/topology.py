@@ -62,39 +62,29 @@ def pair_slot(table_a, table_b, bits, a, b):
 
 @nb.njit(cache=True)
 def match_faces(tets):
-    """Neighbour across every tet face.  Vertex ids must be below 2**31.
+    """Neighbour across every tet face.
 
     Returns (neighbour (M, 4) int64: the tet sharing face k of tet t, or -1 on the boundary;
     overloaded: number of faces found in more than two tets; same_side: number of faces
     whose two tets order them the same way, i.e. lie on the same side, inverted).
     """
     m = tets.shape[0]
-    size = 4 * m + 16  # at most ~2m distinct faces: load <= 1/2
-    # One row per slot (a * 2**32 + b, c, tet * 4 + face of the first tet holding it; a < b < c
-    # the sorted vertex ids): a probe touches one cache line, not one per array.
-    table = np.empty((size, 3), dtype=np.int64)
-    table[:, 0] = -1
-    # Faces start at a slot near stride * (smallest vertex): vertex ids are spatially coherent
-    # and tets come in spatial order, so the probes of nearby tets share cache lines.
     n_vertices = 1
     for t in range(m):
         for k in range(4):
             n_vertices = max(n_vertices, tets[t, k] + 1)
-    # A sub-mesh of a bigger mesh uses few of the ids below n_vertices: rank the used ids
-    # (order kept, so still coherent) to start slots from.  A few faces share a smallest
-    # vertex; with fewer than 8 slots per vertex their runs would merge, so then hash the
-    # whole triple instead.
-    rank = np.zeros(n_vertices, dtype=np.int64)
+    # Bucket the face occurrences by their smallest vertex (a counting sort): each bucket holds
+    # every face that could match, a few dozen at most, and vertex ids are spatially coherent,
+    # so the buckets of nearby tets are near each other in memory.  No hashing, no probing.
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
     for t in range(m):
         for k in range(4):
-            rank[tets[t, k]] = 1
-    used = 0
+            start[min(tets[t, TET_FACES[k, 0]], tets[t, TET_FACES[k, 1]], tets[t, TET_FACES[k, 2]]) + 1] += 1
     for v in range(n_vertices):
-        flag = rank[v]
-        rank[v] = used
-        used += flag
-    stride = size // max(used, 1)
-    local = stride >= 8
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    # Row per stored face: the two larger vertices and tet * 4 + face of the first tet holding it.
+    table = np.empty((4 * m, 3), dtype=np.int64)
     neighbour = np.full((m, 4), -1, dtype=np.int64)
     overloaded = 0
     same_side = 0
@@ -104,40 +94,36 @@ def match_faces(tets):
             v1 = tets[t, TET_FACES[k, 1]]
             v2 = tets[t, TET_FACES[k, 2]]
             a, b, c = _sort3(v0, v1, v2)
-            ab = (np.int64(a) << 32) | np.int64(b)
-            if local:
-                s = (rank[a] * stride + _hash3(b, c, 0, 20) % stride) % size
-            else:
-                s = _hash3(a, b, c, 40) % size
-            while True:
-                if table[s, 0] == -1:
-                    table[s, 0] = ab
-                    table[s, 1] = c
-                    table[s, 2] = t * 4 + k
+            found = -1
+            for s in range(start[a], fill[a]):
+                if table[s, 0] == b and table[s, 1] == c:
+                    found = s
                     break
-                if table[s, 0] == ab and table[s, 1] == c:
-                    o = table[s, 2]
-                    if o < 0:
-                        overloaded += 1
-                        break
-                    ot = o // 4
-                    ok = o % 4
-                    if neighbour[ot, ok] != -1:
-                        overloaded += 1
-                        table[s, 2] = -1
-                        break
-                    neighbour[ot, ok] = t
-                    neighbour[t, k] = ot
-                    # Opposite orientation means the cyclic order of the two faces is reversed.
-                    w0 = tets[ot, TET_FACES[ok, 0]]
-                    w1 = tets[ot, TET_FACES[ok, 1]]
-                    w2 = tets[ot, TET_FACES[ok, 2]]
-                    if (w0 == v0 and w1 == v1) or (w1 == v0 and w2 == v1) or (w2 == v0 and w0 == v1):
-                        same_side += 1
-                    break
-                s += 1
-                if s == size:
-                    s = 0
+            if found < 0:
+                s = fill[a]
+                fill[a] += 1
+                table[s, 0] = b
+                table[s, 1] = c
+                table[s, 2] = t * 4 + k
+                continue
+            o = table[found, 2]
+            if o < 0:
+                overloaded += 1
+                continue
+            ot = o // 4
+            ok = o % 4
+            if neighbour[ot, ok] != -1:
+                overloaded += 1
+                table[found, 2] = -1
+                continue
+            neighbour[ot, ok] = t
+            neighbour[t, k] = ot
+            # Opposite orientation means the cyclic order of the two faces is reversed.
+            w0 = tets[ot, TET_FACES[ok, 0]]
+            w1 = tets[ot, TET_FACES[ok, 1]]
+            w2 = tets[ot, TET_FACES[ok, 2]]
+            if (w0 == v0 and w1 == v1) or (w1 == v0 and w2 == v1) or (w2 == v0 and w0 == v1):
+                same_side += 1
     return neighbour, overloaded, same_side
 
 
