@@ -28,16 +28,16 @@ _EMPTY = np.int64(-1)
 #: Number leaf corners through a dense box index when the box has at most this many
 #: lattice points per leaf (12 bytes each), else through a hash table.
 DENSE_SLOTS_PER_LEAF = 8
+_FIB = np.uint64(0x9E3779B97F4A7C15)
 
 
 @nb.njit(cache=True, inline="always")
 def _slot(key, bits):
     # Morton keys of nearby vertices are close: keep their low bits (cache locality for leaves
     # visited in Morton order) and fold the high bits in, so coarse vertices (keys with many
-    # trailing zeros) still spread over the table.  (No multiplicative scrambling: it cost the
-    # locality and 20% of the numbering time.)
+    # trailing zeros) still spread over the table.
     k = np.uint64(key)
-    return np.int64((k ^ (k >> np.uint64(bits)) ^ (k >> np.uint64(2 * bits))) & np.uint64((1 << bits) - 1))
+    return np.int64((k ^ (k >> np.uint64(bits)) ^ ((k * _FIB) >> np.uint64(64 - bits))) & np.uint64((1 << bits) - 1))
 
 
 @nb.njit(cache=True)
