@@ -386,9 +386,22 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     around = (warped[:, None, :] - CUBE_CORNERS[None, :, :]).reshape(-1, 3)  # the 8 cells at each warped vertex
     around = around[(around >= 0).all(axis=1)]
     band = sorted_unique(np.concatenate([cut_keys, morton_keys(around << (MAX_LEVEL - finest))]))
-    seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field)
-    keys, levels = balance(np.concatenate([band, seed_keys]),
-                           np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
+    def not_outside(octants: np.ndarray, level: int) -> np.ndarray:
+        """Octants that meet the surface or whose anchor is inside (so not wholly outside)."""
+        last = octants + (np.int64(1) << (3 * (MAX_LEVEL - level))) - 1
+        meets = np.searchsorted(met, last, side="right") > np.searchsorted(met, octants)
+        keep = meets.copy()
+        keep[~meets] = rays.winding_numbers(x_crossings, octant_lattice_anchors(octants[~meets], frame)) > 0
+        return keep
+
+    seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
+                                        prune=not_outside)
+    if np.all(seed_levels == finest):  # a uniform lattice: already balanced, nothing to complete
+        keys = sorted_unique(np.concatenate([band, seed_keys]))
+        levels = np.full(keys.shape[0], finest, dtype=np.int8)
+    else:
+        keys, levels = balance(np.concatenate([band, seed_keys]),
+                               np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
     in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
     in_band[fine] = np.isin(keys[fine], band, assume_unique=True)

@@ -130,19 +130,36 @@ def _required_size(field: SizeField, keys: np.ndarray, level: int, frame: FatFra
     return need
 
 
-def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field: SizeField) -> tuple[np.ndarray, np.ndarray]:
+#: size_seeds starts this many levels above max_size, so that pruning can skip whole regions.
+PRUNE_DEPTH = 3
+
+
+def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field: SizeField,
+               prune: Callable[[np.ndarray, int], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Seed octants (keys (N,) int64, levels (N,) int8) covering the box: the coarsest octants
     no larger than max_size whose long edge is at most the size asked for in them (never
-    below the finest level).  Sizes smaller than ``size`` are clamped to it."""
+    below the finest level).  Sizes smaller than ``size`` are clamped to it.
+
+    prune(keys, level) -> (N,) bool keeps the octants that need seeds (say, those not wholly
+    outside the solid); the others are dropped with all their descendants, which lets the
+    descent start PRUNE_DEPTH levels above max_size and skip empty regions whole.
+    """
     finest = frame.levels
-    level = max(0, finest - field.coarse_depth)
+    coarse = max(0, finest - field.coarse_depth)
+    level = max(0, coarse - PRUNE_DEPTH) if prune is not None else coarse
     keys, _ = uniform_leaves(frame, box_min, box_max, level)
     out_keys, out_levels = [], []
-    while level < finest and keys.shape[0]:
-        if not field.regions and field.function is None:
+    while keys.shape[0]:
+        if prune is not None:
+            keys = keys[prune(keys, level)]
+        if level == finest:
             break
-        edge = frame.h * 2.0 ** (finest - level)
-        split = _required_size(field, keys, level, frame) < edge
+        if level < coarse:
+            split = np.ones(keys.shape[0], dtype=bool)
+        elif not field.regions and field.function is None:
+            break
+        else:
+            split = _required_size(field, keys, level, frame) < frame.h * 2.0 ** (finest - level)
         out_keys.append(keys[~split])
         out_levels.append(np.full(int((~split).sum()), level, dtype=np.int8))
         keys = refine_to_level(keys[split], level, level + 1)
