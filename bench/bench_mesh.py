@@ -1,6 +1,6 @@
 """Per-model benchmark of paroct.mesh: tets, time per stage, throughput, quality, accuracy.
 
-    python bench/bench_mesh.py [FOLDER] [--divisions 40 80 160] [--no-hausdorff]
+    python bench/bench_mesh.py [FOLDER] [--divisions 40 80 160] [--no-hausdorff] [--uniform]
 
 FOLDER defaults to ../shared/data/corpus.  Numba compilation is excluded: a small warm-up
 mesh compiles (or loads from cache) every kernel first.  Prints one row per model and
@@ -29,6 +29,7 @@ def main(argv=None) -> int:
     ap.add_argument("folder", nargs="?", default=str(ROOT.parent / "shared" / "data" / "corpus"))
     ap.add_argument("--divisions", type=float, nargs="+", default=[40, 80, 160])
     ap.add_argument("--no-hausdorff", action="store_true", help="skip the (slower) two-sided Hausdorff distance")
+    ap.add_argument("--uniform", action="store_true", help="one size everywhere (max_size = size), no thin-feature refinement")
     args = ap.parse_args(argv)
     files = sorted(Path(args.folder).glob("*.stl")) + sorted(Path(args.folder).glob("*.obj")) + sorted(Path(args.folder).glob("*.off"))
     if not files:
@@ -55,7 +56,11 @@ def main(argv=None) -> int:
         for div in args.divisions:
             t = time.perf_counter()
             try:
-                result = paroct.mesh(surface, divisions=div)
+                if args.uniform:
+                    size = surface.diagonal / div
+                    result = paroct.mesh(surface, size=size, max_size=size, thin_features=False)
+                else:
+                    result = paroct.mesh(surface, divisions=div)
             except ParoctError as exc:
                 print(f"{f.stem:12s} {div:4.0f} error: {exc}")
                 continue
