@@ -10,7 +10,7 @@ from paroct import lattice, octant
 from paroct.errors import ParoctError
 from paroct.frame import LATTICE_TO_SPACE, fat_frame
 from paroct.mesher import mesh
-from paroct.octree import balance, surface_cells, tree_is_balanced, with_ring
+from paroct.octree import balance, surface_cells, tree_is_balanced
 from paroct.quality import tet_quality
 from paroct.sizing import Box, Sphere
 from paroct.surface import load_surface
@@ -145,17 +145,6 @@ def test_surface_cells_match_polygon_clipping(seed):
         assert want <= got  # never misses a cell
         extra = got - want  # only cells touching within the rounding margin
         assert len(extra) <= 0.05 * len(want) + 2
-
-
-def test_with_ring_is_the_27_neighbourhood():
-    level = 4
-    side = 1 << (ML - level)
-    cells = [(1, 1, 1), (5, 0, 3), (15, 15, 15)]
-    keys = np.array([octant.morton_key(x * side, y * side, z * side) for x, y, z in cells], dtype=np.int64)
-    got = {tuple(int(v) // side for v in c) for c in octant.morton_decode(with_ring(np.sort(keys), level))}
-    want = {(x + dx, y + dy, z + dz) for x, y, z in cells for dx, dy, dz in itertools.product((-1, 0, 1), repeat=3)
-            if 0 <= x + dx < 16 and 0 <= y + dy < 16 and 0 <= z + dz < 16}
-    assert got == want
 
 
 def _edge_lengths(points, tets):

@@ -163,44 +163,6 @@ def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, le
     return _depth_first(_MEETS_BOX, lo, hi, np.int64(frame.levels), np.int64(level), no_seeds, no_seeds.astype(np.int8))
 
 
-@nb.njit(cache=True)
-def _touched_cell_keys(lo, hi, cell_bits):
-    """Morton keys (octree coordinates) of the cells of side 2**cell_bits (lattice units) meeting
-    each closed box [lo[i], hi[i]] (lattice units, int64), with repeats."""
-    n = lo.shape[0]
-    out = np.empty(8 * n + 16, dtype=np.int64)
-    m = 0
-    for i in range(n):
-        x0 = lo[i, 0] >> cell_bits
-        y0 = lo[i, 1] >> cell_bits
-        z0 = lo[i, 2] >> cell_bits
-        x1 = hi[i, 0] >> cell_bits
-        y1 = hi[i, 1] >> cell_bits
-        z1 = hi[i, 2] >> cell_bits
-        for z in range(z0, z1 + 1):
-            for y in range(y0, y1 + 1):
-                for x in range(x0, x1 + 1):
-                    if m == out.shape[0]:
-                        out = np.concatenate((out, np.empty(m, dtype=np.int64)))
-                    out[m] = morton_key(x << cell_bits, y << cell_bits, z << cell_bits)
-                    m += 1
-    return out[:m].copy()
-
-
-def touched_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> np.ndarray:
-    """Sorted keys of the octants of ``level`` that a triangle's bounding box meets (closed boxes).
-
-    snapped: (V, 3) int64 surface vertices in lattice units * 2**snap_bits.  An octant not
-    listed contains no surface point, so all its points have one inside/outside class.
-    """
-    tri = snapped[faces]
-    lo = tri.min(axis=1) >> snap_bits
-    hi = tri.max(axis=1) >> snap_bits
-    hi += (tri.max(axis=1) & ((1 << snap_bits) - 1)) == 0  # a max exactly on a lattice plane touches the next cell too
-    keys = _touched_cell_keys(lo, hi, frame.levels - level)
-    return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
-
-
 @nb.njit(cache=True, inline="always")
 def _axis_separates(ax, ay, az, v0, v1, v2, half):
     """True iff the axis separates the triangle (vertices relative to the box centre) from the box."""
@@ -322,32 +284,6 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     """
     keys = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
     return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
-
-
-@nb.njit(cache=True)
-def _neighbour_keys(keys, level):
-    side = octant_len(level)
-    root = np.int64(1) << MAX_LEVEL
-    out = np.empty(27 * keys.shape[0], dtype=np.int64)
-    m = 0
-    for i in range(keys.shape[0]):
-        x, y, z = morton_coords(keys[i])
-        for dz in range(-1, 2):
-            for dy in range(-1, 2):
-                for dx in range(-1, 2):
-                    nx = x + dx * side
-                    ny = y + dy * side
-                    nz = z + dz * side
-                    if nx < 0 or ny < 0 or nz < 0 or nx >= root or ny >= root or nz >= root:
-                        continue
-                    out[m] = morton_key(nx, ny, nz)
-                    m += 1
-    return out[:m]
-
-
-def with_ring(keys: np.ndarray, level: int) -> np.ndarray:
-    """Sorted keys of the octants of ``level`` in ``keys`` or touching one of them (face, edge or corner)."""
-    return sorted_unique(_neighbour_keys(np.asarray(keys, dtype=np.int64), level))
 
 
 def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndarray:
