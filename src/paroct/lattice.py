@@ -75,6 +75,22 @@ def _find(table_keys, table_vals, mask, key, slot):
         s = (s + 1) & mask
 
 
+@nb.njit(cache=True, inline="always")
+def _record(table_keys, table_vals, bits, dense, coords, count, x, y, z):
+    """After an insert that made a new vertex: store its coordinates (growing the array) and
+    grow the hash table when half full.  Returns (table_keys, table_vals, bits, mask, coords, count)."""
+    if count == coords.shape[0]:
+        coords = _grow(coords, count)
+    coords[count, 0] = x
+    coords[count, 1] = y
+    coords[count, 2] = z
+    count += 1
+    if not dense and 2 * count > table_keys.shape[0]:
+        table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
+    mask = np.int64(-1) if dense else (np.int64(1) << bits) - 1
+    return table_keys, table_vals, bits, mask, coords, count
+
+
 @nb.njit(cache=True)
 def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, face_edges):
     """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
@@ -111,13 +127,7 @@ def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, fa
         key = morton_key(x, y, z)
         _, new = _insert(table_keys, table_vals, mask, key, _first_slot(x, y, z, key, dense, box_lo, box_dims, bits), count)
         if new:
-            coords[count, 0] = x
-            coords[count, 1] = y
-            coords[count, 2] = z
-            count += 1
-            if not dense and 2 * count > table_keys.shape[0]:
-                table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
-                mask = (np.int64(1) << bits) - 1
+            table_keys, table_vals, bits, mask, coords, count = _record(table_keys, table_vals, bits, dense, coords, count, x, y, z)
     for i in range(n):
         for c in range(8):
             x = anchors[i, 0] + sides[i] * CUBE_CORNERS[c, 0]
@@ -126,15 +136,7 @@ def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, fa
             key = morton_key(x, y, z)
             vid, new = _insert(table_keys, table_vals, mask, key, _first_slot(x, y, z, key, dense, box_lo, box_dims, bits), count)
             if new:
-                if count == coords.shape[0]:
-                    coords = _grow(coords, count)
-                coords[count, 0] = x
-                coords[count, 1] = y
-                coords[count, 2] = z
-                count += 1
-                if not dense and 2 * count > table_keys.shape[0]:
-                    table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
-                    mask = (np.int64(1) << bits) - 1
+                table_keys, table_vals, bits, mask, coords, count = _record(table_keys, table_vals, bits, dense, coords, count, x, y, z)
             corner_ids[i, c] = vid
     split_row = np.full(n, -1, dtype=np.int64)
     n_coarse = 0
@@ -164,15 +166,7 @@ def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, fa
                 continue
             vid, new = _insert(table_keys, table_vals, mask, key, slot, count)
             if new:
-                if count == coords.shape[0]:
-                    coords = _grow(coords, count)
-                coords[count, 0] = x
-                coords[count, 1] = y
-                coords[count, 2] = z
-                count += 1
-                if not dense and 2 * count > table_keys.shape[0]:
-                    table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
-                    mask = (np.int64(1) << bits) - 1
+                table_keys, table_vals, bits, mask, coords, count = _record(table_keys, table_vals, bits, dense, coords, count, x, y, z)
             split_ids[r, p] = vid
     return corner_ids, split_row, split_ids, coords[:count].copy()
 
