@@ -246,3 +246,24 @@ def test_sample_triangles_are_on_their_triangles_and_repeatable():
     random_part = a[11:].reshape(3, 4, 3)
     for f, pts in zip(faces, random_part):
         assert max(naive.point_triangle_distance(p, *vertices[f]) for p in pts) < 1e-12
+
+
+def test_mesh_metrics_orient_by_majority_and_count_the_rest_inverted():
+    from paroct.check import mesh_metrics
+    from paroct.mesher import mesh
+
+    surface = load_surface(manifold3d.Manifold.cube([1.0, 1.0, 1.0]))
+    result = mesh(surface, size=0.25, max_size=0.25)
+    points, tets = result.mesh.points, result.mesh.tets.astype(np.int64)
+    good = mesh_metrics(points, tets, surface)
+    assert good["inverted"] == 0 and good["closed"] and good["topology_kept"]
+    assert good["tets"] == len(tets) and abs(good["volume_error"]) < 0.01
+    assert good["min_dihedral"] <= good["p1_dihedral"] <= good["max_dihedral"]
+    # Another mesher's orientation convention: all tets flipped is the same mesh.
+    flipped = mesh_metrics(points, tets[:, [1, 0, 2, 3]], surface)
+    assert flipped["inverted"] == 0 and flipped["min_dihedral"] == good["min_dihedral"]
+    # A minority of flipped tets is inverted and breaks conformity.
+    some = tets.copy()
+    some[:3] = some[:3][:, [1, 0, 2, 3]]
+    bad = mesh_metrics(points, some, surface)
+    assert bad["inverted"] == 3 and not bad["closed"]

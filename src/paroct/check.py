@@ -423,3 +423,38 @@ def _surface_fields(points, faces, surface: Surface, per_triangle: int, seed: in
     out.update(hausdorff_to_surface=float(to_surface[i] / diagonal), hausdorff_to_mesh=float(to_mesh[j] / diagonal),
                hausdorff_at=tuple(float(c) for c in at))
     return out
+
+
+def mesh_metrics(points: np.ndarray, tets: np.ndarray, surface: Surface) -> dict:
+    """One set of figures for any tet mesh of ``surface`` (the benchmark's measurement).
+
+    Tets are first oriented as most of them are (other meshers' conventions differ); then
+    ``inverted`` counts those of the other sign or zero volume.  Returns a dict: tets,
+    vertices, min / 1st-percentile / max dihedral (degrees), min and mean 3r/R, the fraction
+    with 3r/R < 0.3, inverted, volume error (relative), Hausdorff distance / diagonal (two
+    sided, sampled, exact point-to-triangle), closed (boundary a closed 2-manifold and faces
+    conforming), topology kept (boundary components and genus equal the surface's).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    tets = np.asarray(tets, dtype=np.int64)
+    q = tet_quality(points, tets)
+    if tets.shape[0] and (q.volume < 0).sum() > tets.shape[0] / 2:
+        tets = tets[:, [0, 2, 1, 3]]
+        q = tet_quality(points, tets)
+    report = check_mesh(points, tets, surface)
+    good = q.volume > 0
+    return {
+        "tets": int(tets.shape[0]),
+        "vertices": int(report.n_vertices - report.n_unreferenced),
+        "min_dihedral": float(q.min_dihedral.min()) if tets.size else float("nan"),
+        "p1_dihedral": float(np.percentile(q.min_dihedral, 1)) if tets.size else float("nan"),
+        "max_dihedral": float(q.max_dihedral.max()) if tets.size else float("nan"),
+        "min_radius_ratio": float(q.radius_ratio.min()) if tets.size else float("nan"),
+        "mean_radius_ratio": float(q.radius_ratio[good].mean()) if good.any() else float("nan"),
+        "frac_radius_ratio_below_0.3": float((q.radius_ratio < 0.3).mean()) if tets.size else float("nan"),
+        "inverted": int((~good).sum()),
+        "volume_error": float(report.volume_error),
+        "hausdorff": float(report.hausdorff),
+        "closed": bool(report.boundary_manifold and report.overloaded_faces == 0 and report.same_side_faces == 0),
+        "topology_kept": bool((report.boundary_components, report.boundary_genus) == (report.surface_components, report.surface_genus)),
+    }

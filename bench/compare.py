@@ -1,0 +1,231 @@
+"""paroct against TetGen, fTetWild, Gmsh and Netgen on a folder of closed surfaces.
+
+    python bench/compare.py [FOLDER] [--divisions 40 80] [--meshers paroct tetgen ...]
+                            [--models bunny fandisk] [--time-limit 300] [--memory-limit 8]
+                            [--json results.json]
+
+Peers come from the optional extra: pip install -e ".[bench]".  Each run is a subprocess
+of this script (``--child``) with a wall-time limit and an address-space limit; it meshes
+once (the mesher call alone is timed, reading the surface included; paroct's cached numba
+kernels are loaded before) and saves the mesh; peak memory is the child's peak RSS above
+its level before the call.  The parent measures every mesh
+with the same function, paroct.check.mesh_metrics, against the input surface.  Failures
+(exceptions, time or memory limit, no tets) are rows with their reason, never dropped.
+Peers are set up as a careful user would, for a target long edge ``size`` = diagonal / N:
+- paroct: ``paroct.mesh(size=size)`` (graded, thin features refined).
+- TetGen: quality switch (radius-edge 1.2, min dihedral 10), max volume of a regular tet of
+  edge ``size``.
+- fTetWild (pytetwild): ideal edge length ``size``, default envelope (1e-3 of the diagonal).
+- Gmsh: the STL merged, surfaces classified (40 degrees), a volume from the surface loop,
+  MeshSizeMax = ``size``; Delaunay (Algorithm3D 1) and HXT (10).
+- Netgen: STL geometry, maxh = ``size``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+MESHERS = ("paroct", "tetgen", "ftetwild", "gmsh-delaunay", "gmsh-hxt", "netgen")
+
+
+def _regular_tet_volume(edge: float) -> float:
+    return edge**3 / (6 * np.sqrt(2))
+
+
+def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh the surface file with one mesher; returns (points (N, 3), tets (M, 4))."""
+    if name == "paroct":
+        import paroct
+
+        result = paroct.mesh(path, size=size)
+        return result.mesh.points, result.mesh.tets
+    from paroct.surface import load_surface
+
+    surface = load_surface(path)
+    vertices, faces = surface.vertices, surface.faces.astype(np.int32)
+    if name == "tetgen":
+        import tetgen
+
+        nodes, elems, *_ = tetgen.TetGen(vertices, faces).tetrahedralize(
+            quality=True, minratio=1.2, mindihedral=10.0, maxvolume=_regular_tet_volume(size))
+        return nodes, elems
+    if name == "ftetwild":
+        import pytetwild
+
+        return pytetwild.tetrahedralize(vertices, faces, edge_length_abs=size)
+    if name.startswith("gmsh"):
+        import gmsh
+
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.merge(str(path))
+            gmsh.model.mesh.classifySurfaces(40 * np.pi / 180, True, True, np.pi)
+            gmsh.model.mesh.createGeometry()
+            loop = gmsh.model.geo.addSurfaceLoop([s for _, s in gmsh.model.getEntities(2)])
+            gmsh.model.geo.addVolume([loop])
+            gmsh.model.geo.synchronize()
+            gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+            gmsh.option.setNumber("Mesh.Algorithm3D", 1 if name == "gmsh-delaunay" else 10)
+            gmsh.model.mesh.generate(3)
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            points = coords.reshape(-1, 3)
+            index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+            index[tags.astype(np.int64)] = np.arange(len(tags))
+            _, node_tags = gmsh.model.mesh.getElementsByType(4)
+            return points, index[node_tags.astype(np.int64)].reshape(-1, 4)
+        finally:
+            gmsh.finalize()
+    if name == "netgen":
+        from netgen.stl import STLGeometry
+
+        m = STLGeometry(str(path)).GenerateMesh(maxh=size)
+        points = np.array([p.p for p in m.Points()])
+        tets = np.array([[v.nr - 1 for v in e.vertices] for e in m.Elements3D()], dtype=np.int64)
+        return points, tets
+    raise ValueError(f"unknown mesher {name}")
+
+
+def _child(args) -> int:
+    limit = int(args.memory_limit * 2**30)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    if args.mesher == "paroct":  # load the cached numba kernels first, as a long-lived process would have
+        run_mesher("paroct", ROOT / "data" / "bunny.stl", 0.02)
+    baseline = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    t = time.perf_counter()
+    points, tets = run_mesher(args.mesher, Path(args.model), args.size)
+    seconds = time.perf_counter() - t
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - baseline
+    np.savez(args.out, points=np.asarray(points, dtype=np.float64), tets=np.asarray(tets, dtype=np.int64),
+             seconds=seconds, peak=peak)
+    return 0
+
+
+def _warm_paroct() -> None:
+    """Compile or load paroct's kernels once, outside every timed run."""
+    subprocess.run([sys.executable, "-c", "import paroct; paroct.mesh(r'%s', divisions=10)" % (ROOT / "data" / "bunny.stl")],
+                   check=True, capture_output=True)
+
+
+def measure(mesher: str, model: Path, size: float, time_limit: float, memory_limit: float) -> dict:
+    """One run in a child process, measured; a dict with 'status' 'ok' or the failure."""
+    from paroct.check import mesh_metrics
+    from paroct.surface import load_surface
+
+    row = {"mesher": mesher, "model": model.stem, "size": size}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "mesh.npz"
+        cmd = [sys.executable, __file__, "--child", "--mesher", mesher, "--model", str(model), "--size", repr(size),
+               "--out", str(out), "--memory-limit", str(memory_limit)]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit)
+        except subprocess.TimeoutExpired:
+            return {**row, "status": f"timeout after {time_limit:.0f} s"}
+        if proc.returncode != 0 or not out.exists():
+            lines = [s for s in (proc.stderr or "").strip().splitlines() if s.strip()]
+            reason = lines[-1][:120] if lines else f"exit code {proc.returncode}"
+            if "MemoryError" in (proc.stderr or "") or "bad_alloc" in (proc.stderr or ""):
+                reason = f"memory limit {memory_limit:g} GiB: {reason}"
+            return {**row, "status": f"failed: {reason}"}
+        data = np.load(out)
+        points, tets = data["points"], data["tets"]
+        if tets.shape[0] == 0:
+            return {**row, "status": "failed: no tets"}
+        row.update(seconds=float(data["seconds"]), peak_bytes=int(data["peak"]))
+    row.update(mesh_metrics(points, tets, load_surface(model)))
+    row["tets_per_s"] = row["tets"] / row["seconds"]
+    row["bytes_per_tet"] = row["peak_bytes"] / row["tets"]
+    row["status"] = "ok"
+    return row
+
+
+COLUMNS = [("tets", "{:>9d}"), ("seconds", "{:8.2f}"), ("tets_per_s", "{:10.0f}"), ("bytes_per_tet", "{:7.0f}"),
+           ("min_dihedral", "{:6.2f}"), ("p1_dihedral", "{:6.2f}"), ("max_dihedral", "{:6.2f}"),
+           ("min_radius_ratio", "{:6.3f}"), ("mean_radius_ratio", "{:6.3f}"), ("frac_radius_ratio_below_0.3", "{:7.4f}"),
+           ("inverted", "{:5d}"), ("volume_error", "{:+8.4f}"), ("hausdorff", "{:8.5f}"), ("closed", "{!s:>6}"),
+           ("topology_kept", "{!s:>6}")]
+
+
+def format_row(row: dict) -> str:
+    head = f"{row['model']:12s} {row['mesher']:14s}"
+    if row["status"] != "ok":
+        return f"{head} {row['status']}"
+    return head + " " + " ".join(fmt.format(row[key]) for key, fmt in COLUMNS)
+
+
+def summary(rows: list[dict]) -> list[str]:
+    """Per mesher: successes, medians and worst cases."""
+    out = [f"{'mesher':14s} {'ok':>5s} {'med tets/s':>11s} {'med B/tet':>9s} {'worst min dih':>13s} {'med p1 dih':>10s} "
+           f"{'worst max dih':>13s} {'worst 3r/R':>10s} {'med |vol err|':>13s} {'worst haus':>10s} {'closed':>6s}"]
+    for mesher in dict.fromkeys(r["mesher"] for r in rows):
+        mine = [r for r in rows if r["mesher"] == mesher]
+        ok = [r for r in mine if r["status"] == "ok"]
+        if not ok:
+            out.append(f"{mesher:14s} {0:>2d}/{len(mine):<2d}")
+            continue
+        med = lambda k: statistics.median(r[k] for r in ok)  # noqa: E731
+        out.append(f"{mesher:14s} {len(ok):>2d}/{len(mine):<2d} {med('tets_per_s'):11.0f} {med('bytes_per_tet'):9.0f} "
+                   f"{min(r['min_dihedral'] for r in ok):13.2f} {med('p1_dihedral'):10.2f} "
+                   f"{max(r['max_dihedral'] for r in ok):13.2f} {min(r['min_radius_ratio'] for r in ok):10.3f} "
+                   f"{statistics.median(abs(r['volume_error']) for r in ok):13.4f} {max(r['hausdorff'] for r in ok):10.5f} "
+                   f"{sum(r['closed'] for r in ok):>3d}/{len(ok)}")
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder", nargs="?", default=str(ROOT.parent / "shared" / "data" / "corpus"))
+    ap.add_argument("--divisions", type=float, nargs="+", default=[40, 80])
+    ap.add_argument("--meshers", nargs="+", default=list(MESHERS), choices=MESHERS)
+    ap.add_argument("--models", nargs="+", help="model names (file stems) to run; default all")
+    ap.add_argument("--time-limit", type=float, default=300.0, help="seconds per run")
+    ap.add_argument("--memory-limit", type=float, default=8.0, help="GiB of address space per run")
+    ap.add_argument("--json", help="write all rows to this file")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--mesher", help=argparse.SUPPRESS)
+    ap.add_argument("--model", help=argparse.SUPPRESS)
+    ap.add_argument("--size", type=float, help=argparse.SUPPRESS)
+    ap.add_argument("--out", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        return _child(args)
+    from paroct.surface import load_surface
+
+    files = sorted(Path(args.folder).glob("*.stl"))
+    if args.models:
+        files = [f for f in files if f.stem in args.models]
+    if not files:
+        print(f"no surfaces in {args.folder}", file=sys.stderr)
+        return 2
+    _warm_paroct()
+    rows = []
+    for div in args.divisions:
+        print(f"\n== size = diagonal / {div:g}")
+        print(f"{'model':12s} {'mesher':14s} " + " ".join(k[:9] for k, _ in COLUMNS))
+        for f in files:
+            size = load_surface(f).diagonal / div
+            for mesher in args.meshers:
+                row = measure(mesher, f, size, args.time_limit, args.memory_limit)
+                row["divisions"] = div
+                rows.append(row)
+                print(format_row(row), flush=True)
+        print()
+        print("\n".join(summary([r for r in rows if r["divisions"] == div])))
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
