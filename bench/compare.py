@@ -2,7 +2,8 @@
 
     python bench/compare.py [FOLDER] [--divisions 40 80] [--meshers paroct tetgen ...]
                             [--models bunny fandisk] [--time-limit 300] [--memory-limit 8]
-                            [--json results.json]
+                            [--json results.json] [--markdown tables.md]
+    python bench/compare.py --from-json results40.json results80.json [--markdown tables.md]
 
 Peers come from the optional extra: pip install -e ".[bench]".  Each run is a subprocess
 of this script (``--child``) with a wall-time limit and an address-space limit; it meshes
@@ -183,6 +184,37 @@ def summary(rows: list[dict]) -> list[str]:
     return out
 
 
+def markdown(rows: list[dict]) -> str:
+    """Per-level markdown tables: per mesher medians and worst cases, then the failures."""
+    out = []
+    for div in dict.fromkeys(r["divisions"] for r in rows):
+        level = [r for r in rows if r["divisions"] == div]
+        out += [f"### size = diagonal / {div:g}", "",
+                "| mesher | ok | median tets/s | median time s | worst min dihedral | median 1st-pct dihedral "
+                "| worst max dihedral | worst min 3r/R | median mean 3r/R | median \|volume error\| % "
+                "| worst Hausdorff / diag | closed, topology kept |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for mesher in dict.fromkeys(r["mesher"] for r in level):
+            mine = [r for r in level if r["mesher"] == mesher]
+            ok = [r for r in mine if r["status"] == "ok"]
+            if not ok:
+                out.append(f"| {mesher} | 0/{len(mine)} |" + " |" * 10)
+                continue
+            med = lambda k: statistics.median(r[k] for r in ok)  # noqa: E731
+            out.append(
+                f"| {mesher} | {len(ok)}/{len(mine)} | {med('tets_per_s'):,.0f} | {med('seconds'):.2f} "
+                f"| {min(r['min_dihedral'] for r in ok):.2f} | {med('p1_dihedral'):.2f} "
+                f"| {max(r['max_dihedral'] for r in ok):.2f} | {min(r['min_radius_ratio'] for r in ok):.3f} "
+                f"| {med('mean_radius_ratio'):.3f} | {100 * statistics.median(abs(r['volume_error']) for r in ok):.2f} "
+                f"| {max(r['hausdorff'] for r in ok):.4f} | {sum(r['closed'] for r in ok)}, "
+                f"{sum(r['topology_kept'] for r in ok)} of {len(ok)} |")
+        failed = [r for r in level if r["status"] != "ok"]
+        if failed:
+            out += ["", "Failures: " + "; ".join(f"{r['mesher']} on {r['model']}: {r['status']}" for r in failed)]
+        out.append("")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folder", nargs="?", default=str(ROOT.parent / "shared" / "data" / "corpus"))
@@ -192,6 +224,8 @@ def main(argv=None) -> int:
     ap.add_argument("--time-limit", type=float, default=300.0, help="seconds per run")
     ap.add_argument("--memory-limit", type=float, default=8.0, help="GiB of address space per run")
     ap.add_argument("--json", help="write all rows to this file")
+    ap.add_argument("--markdown", help="write per-level summary tables (markdown) to this file")
+    ap.add_argument("--from-json", nargs="+", help="only tabulate rows saved by earlier --json runs")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--mesher", help=argparse.SUPPRESS)
     ap.add_argument("--model", help=argparse.SUPPRESS)
@@ -200,6 +234,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.child:
         return _child(args)
+    if args.from_json:
+        rows = [row for f in args.from_json for row in json.loads(Path(f).read_text())]
+        text = markdown(rows)
+        Path(args.markdown).write_text(text) if args.markdown else print(text)
+        return 0
     from paroct.surface import load_surface
 
     files = sorted(Path(args.folder).glob("*.stl"))
@@ -224,6 +263,8 @@ def main(argv=None) -> int:
         print("\n".join(summary([r for r in rows if r["divisions"] == div])))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+    if args.markdown:
+        Path(args.markdown).write_text(markdown(rows))
     return 0
 
 
