@@ -14,8 +14,8 @@ with the same function, paroct.check.mesh_metrics, against the input surface.  F
 (exceptions, time or memory limit, no tets) are rows with their reason, never dropped.
 Peers are set up as a careful user would, for a target long edge ``size`` = diagonal / N:
 - paroct: ``paroct.mesh(size=size)`` (graded, thin features refined).
-- TetGen: quality switch (radius-edge 1.2, min dihedral 10), max volume of a regular tet of
-  edge ``size``.
+- TetGen: quality switch (radius-edge 1.2, min dihedral 10) and a fixed volume bound (``-a``)
+  of a regular tet of edge ``size``.
 - fTetWild (pytetwild): ideal edge length ``size``, default envelope (1e-3 of the diagonal).
 - Gmsh: the STL merged, surfaces classified (40 degrees), a volume from the surface loop,
   MeshSizeMax = ``size``; Delaunay (Algorithm3D 1) and HXT (10).
@@ -59,7 +59,7 @@ def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarr
         import tetgen
 
         nodes, elems, *_ = tetgen.TetGen(vertices, faces).tetrahedralize(
-            quality=True, minratio=1.2, mindihedral=10.0, maxvolume=_regular_tet_volume(size))
+            quality=True, minratio=1.2, mindihedral=10.0, fixedvolume=True, maxvolume=_regular_tet_volume(size))
         return nodes, elems
     if name == "ftetwild":
         import pytetwild
@@ -235,7 +235,9 @@ def main(argv=None) -> int:
     if args.child:
         return _child(args)
     if args.from_json:
-        rows = [row for f in args.from_json for row in json.loads(Path(f).read_text())]
+        # A later file's row replaces an earlier one for the same mesher, model and size.
+        merged = {(r["mesher"], r["model"], r["divisions"]): r for f in args.from_json for r in json.loads(Path(f).read_text())}
+        rows = list(merged.values())
         text = markdown(rows)
         Path(args.markdown).write_text(text) if args.markdown else print(text)
         return 0
