@@ -456,5 +456,6 @@ def mesh_metrics(points: np.ndarray, tets: np.ndarray, surface: Surface) -> dict
         "volume_error": float(report.volume_error),
         "hausdorff": float(report.hausdorff),
         "closed": bool(report.boundary_manifold and report.overloaded_faces == 0 and report.same_side_faces == 0),
-        "topology_kept": bool((report.boundary_components, report.boundary_genus) == (report.surface_components, report.surface_genus)),
+        "topology_kept": bool((report.boundary_components, report.boundary_genus)
+                              == (report.surface_components, report.surface_genus)),
     }
