@@ -176,9 +176,10 @@ def mesh(
     thin_features: when the mesh loses topology (boundary components, genus) or more than 1 %
     of the volume, the boundary size shrinks by halves (down to min_size, default size / 8) and
     the solid is meshed again: first straight to two element layers across the thinnest wall
-    or gap found, then by halves while it still loses; False keeps size and only warns.  max_memory: bytes the run may use (default: the machine's available
-    memory); a size that would need more is refused before any work.  progress: called with
-    each stage's name when it ends.
+    or gap found, then by halves while it still loses, as far as max_memory allows; False
+    keeps size and only warns.  max_memory: bytes the run may use (default: the machine's
+    available memory); a size that would need more is refused before any work.  progress:
+    called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
