@@ -241,3 +241,11 @@ def test_match_faces_matches_a_dictionary(seed):
     want = naive.match_faces(tets)
     assert got[1] == want[1] and got[2] == want[2]
     assert np.array_equal(got[0], want[0])
+
+
+def test_refinement_stops_where_memory_ends_and_says_so():
+    # At size 0.1 the fin part fits in 10 MB; a boundary half as fine would not.
+    result = mesh(_FIN_PART, size=0.1, max_memory=10 * 2**20)
+    rep = result.report
+    assert rep.size == pytest.approx(0.1) and not rep.notes
+    assert len(rep.warnings) == 1 and "would not fit in memory" in rep.warnings[0] and "thinnest wall" in rep.warnings[0]
