@@ -24,7 +24,6 @@ import numba as nb
 import numpy as np
 
 from .frame import EDGE_IS_LONG
-from .topology import pair_slot, pair_table
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
@@ -49,14 +48,28 @@ def collect_cut_edges(tets, inside, coords):
     """Unique lattice edges of tets whose ends differ in class.
 
     Returns (starts (E,) vertex ids, ends (E,), directions (E,) index into EDGE_DIRECTIONS,
-    slot table for lookup: table_a, table_b, table_edge, bits); end - start = side * direction.
+    then the lookup table (first, last, partner, edge): the edges whose smaller end is a are
+    partner[first[a]:last[a]] with indices edge[...]); end - start = side * direction.
+    Edges are bucketed by their smaller end (a counting sort): vertex ids are spatially
+    coherent, so buckets of nearby tets are near each other in memory.
     """
     m = tets.shape[0]
-    table_a, table_b, bits = pair_table(m)
-    table_edge = np.full(table_a.shape[0], -1, dtype=np.int64)
-    starts = np.empty(m + 16, dtype=np.int64)
-    ends = np.empty(m + 16, dtype=np.int64)
-    dirs = np.empty(m + 16, dtype=np.int64)
+    n_vertices = coords.shape[0]
+    first = np.zeros(n_vertices + 1, dtype=np.int64)
+    for t in range(m):
+        for e in range(6):
+            p = tets[t, _EDGE_PAIRS[e, 0]]
+            q = tets[t, _EDGE_PAIRS[e, 1]]
+            if inside[p] != inside[q]:
+                first[min(p, q) + 1] += 1
+    for v in range(n_vertices):
+        first[v + 1] += first[v]
+    last = first[:-1].copy()
+    partner = np.empty(first[n_vertices], dtype=np.int64)
+    edge = np.empty(first[n_vertices], dtype=np.int64)
+    starts = np.empty(first[n_vertices], dtype=np.int64)
+    ends = np.empty(first[n_vertices], dtype=np.int64)
+    dirs = np.empty(first[n_vertices], dtype=np.int64)
     n = 0
     for t in range(m):
         for e in range(6):
@@ -66,13 +79,11 @@ def collect_cut_edges(tets, inside, coords):
                 continue
             a = min(p, q)
             b = max(p, q)
-            s = pair_slot(table_a, table_b, bits, a, b)
-            if s >= 0:
+            if _edge_slot(first, last, partner, a, b) >= 0:
                 continue
-            s = -1 - s
-            table_a[s] = a
-            table_b[s] = b
-            table_edge[s] = n
+            partner[last[a]] = b
+            edge[last[a]] = n
+            last[a] += 1
             dx = coords[q, 0] - coords[p, 0]
             dy = coords[q, 1] - coords[p, 1]
             dz = coords[q, 2] - coords[p, 2]
@@ -80,17 +91,20 @@ def collect_cut_edges(tets, inside, coords):
                 p, q = q, p
                 dx, dy, dz = -dx, -dy, -dz
             bits3 = (1 if dx > 0 else 0) | (2 if dy > 0 else 0) | (4 if dz > 0 else 0)
-            if n == starts.shape[0]:
-                starts = np.concatenate((starts, np.empty(n, dtype=np.int64)))
-                ends = np.concatenate((ends, np.empty(n, dtype=np.int64)))
-                dirs = np.concatenate((dirs, np.empty(n, dtype=np.int64)))
             starts[n] = p
             ends[n] = q
             dirs[n] = _DIRECTION_OF_BITS[bits3]
             n += 1
-            if 2 * n > table_a.shape[0]:
-                raise ValueError("edge table overflow")
-    return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), table_a, table_b, table_edge, bits
+    return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), first, last, partner, edge
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_slot(first, last, partner, a, b):
+    """Slot of the edge (a, b), a < b, in a collect_cut_edges table, or -1."""
+    for s in range(first[a], last[a]):
+        if partner[s] == b:
+            return s
+    return -1
 
 
 @nb.njit(cache=True)
@@ -119,8 +133,8 @@ def _warp(n_vertices, starts, ends, fracs, lengths, alphas):
 class CutEdges:
     """Lattice edges whose ends differ in class.  starts, ends: (E,) vertex ids with
     end - start = side * EDGE_DIRECTIONS[directions]; fracs: (E,) cut position from
-    start, in [0, 1]; points: (E, 3) space positions of the cut points; table: the
-    hash table (keys a, keys b, edge index, bits) finding an edge from its two ends."""
+    start, in [0, 1]; points: (E, 3) space positions of the cut points; table: the lookup
+    of collect_cut_edges (first, last, partner, edge) finding an edge from its two ends."""
 
     starts: np.ndarray
     ends: np.ndarray
@@ -219,11 +233,9 @@ def _quad_first_diagonal(coords, a, b, e):
 
 
 @nb.njit(cache=True)
-def _cut_id(table_a, table_b, table_edge, bits, n_lattice, p, q):
-    a = min(p, q)
-    b = max(p, q)
-    s = pair_slot(table_a, table_b, bits, a, b)
-    return n_lattice + table_edge[s]
+def _cut_id(table, n_lattice, p, q):
+    first, last, partner, edge = table
+    return n_lattice + edge[_edge_slot(first, last, partner, min(p, q), max(p, q))]
 
 
 @nb.njit(cache=True)
@@ -285,7 +297,6 @@ def _stencil_counts(tets, signs):
 def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch):
     """Write the stencil tets of lattice tet t from out[k] on; returns whether the lattice tet
     was cut or warped (False: it is copied untouched)."""
-    table_a, table_b, table_edge, bits = table
     plus = scratch[0]
     zero = scratch[1]
     minus = scratch[2]
@@ -301,7 +312,7 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
         a = plus[0]
         for i in range(4):
             v = tets[t, i]
-            pv[i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, v) if signs[v] < 0 else v
+            pv[i] = _cut_id(table, n_lattice, a, v) if signs[v] < 0 else v
         _emit(out, k, pv[0], pv[1], pv[2], pv[3])
         return True
     if n_p == 2 and n_z == 1:
@@ -309,8 +320,8 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
         b = plus[1]
         z = zero[0]
         e = minus[0]
-        cae = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, e)
-        cbe = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, e)
+        cae = _cut_id(table, n_lattice, a, e)
+        cbe = _cut_id(table, n_lattice, b, e)
         if _quad_first_diagonal(coords, a, b, e):
             _emit(out, k, z, a, b, cbe)
             _emit(out, k + 1, z, a, cbe, cae)
@@ -325,11 +336,11 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
         c = minus[0]
         d = minus[1]
         pv[0] = a
-        pv[1] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, c)
-        pv[2] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, a, d)
+        pv[1] = _cut_id(table, n_lattice, a, c)
+        pv[2] = _cut_id(table, n_lattice, a, d)
         pv[3] = b
-        pv[4] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, c)
-        pv[5] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, b, d)
+        pv[4] = _cut_id(table, n_lattice, b, c)
+        pv[5] = _cut_id(table, n_lattice, b, d)
         choice = 0
         # quad 0 = (a, cut ac, cut bc, b): bit 0 clear joins a to cut bc.
         if not _quad_first_diagonal(coords, a, b, c):
@@ -344,7 +355,7 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
     else:
         for i in range(3):
             pv[i] = plus[i]
-            pv[3 + i] = _cut_id(table_a, table_b, table_edge, bits, n_lattice, plus[i], minus[0])
+            pv[3 + i] = _cut_id(table, n_lattice, plus[i], minus[0])
         choice = 0
         for i in range(3):
             j = (i + 1) % 3
