@@ -18,17 +18,20 @@ TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.
 
 
 @nb.njit(cache=True, inline="always")
-def _dihedral(nk0, nk1, nk2, lk, nm0, nm1, nm2, lm):
-    """Dihedral angle (degrees) between the faces with outward normals nk, nm (lengths lk, lm)."""
+def _dihedral_cosine(nk0, nk1, nk2, lk, nm0, nm1, nm2, lm):
+    """Cosine of the dihedral angle between the faces with outward normals nk, nm (lengths lk,
+    lm), clamped to [-1, 1]; 1 (angle 0) for a degenerate face."""
     if lk == 0.0 or lm == 0.0:
-        return 0.0
+        return 1.0
     c = -(nk0 * nm0 + nk1 * nm1 + nk2 * nm2) / (lk * lm)
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return min(1.0, max(-1.0, c))
 
 
 @nb.njit(cache=True, inline="always")
-def _measure_tet(points, tets, t, angles):
-    """Signed volume, 3r/R, and the six dihedral angles (written to angles[0:6], TET_EDGES order)."""
+def _measure_tet(points, tets, t, cosines):
+    """Signed volume and 3r/R of tet t, and the cosines of its six dihedral angles (written to
+    cosines[0:6], TET_EDGES order).  The cosine falls as the angle grows, so extremes are
+    reduced over cosines and only they go through acos."""
     a = tets[t, 0]
     b = tets[t, 1]
     c = tets[t, 2]
@@ -50,12 +53,12 @@ def _measure_tet(points, tets, t, angles):
     l2 = math.sqrt(n2x * n2x + n2y * n2y + n2z * n2z)
     l3 = math.sqrt(n3x * n3x + n3y * n3y + n3z * n3z)
     # Edge (i, j) lies between the faces opposite the other two vertices.
-    angles[0] = _dihedral(n2x, n2y, n2z, l2, n3x, n3y, n3z, l3)  # 01
-    angles[1] = _dihedral(n1x, n1y, n1z, l1, n3x, n3y, n3z, l3)  # 02
-    angles[2] = _dihedral(n1x, n1y, n1z, l1, n2x, n2y, n2z, l2)  # 03
-    angles[3] = _dihedral(n0x, n0y, n0z, l0, n3x, n3y, n3z, l3)  # 12
-    angles[4] = _dihedral(n0x, n0y, n0z, l0, n2x, n2y, n2z, l2)  # 13
-    angles[5] = _dihedral(n0x, n0y, n0z, l0, n1x, n1y, n1z, l1)  # 23
+    cosines[0] = _dihedral_cosine(n2x, n2y, n2z, l2, n3x, n3y, n3z, l3)  # 01
+    cosines[1] = _dihedral_cosine(n1x, n1y, n1z, l1, n3x, n3y, n3z, l3)  # 02
+    cosines[2] = _dihedral_cosine(n1x, n1y, n1z, l1, n2x, n2y, n2z, l2)  # 03
+    cosines[3] = _dihedral_cosine(n0x, n0y, n0z, l0, n3x, n3y, n3z, l3)  # 12
+    cosines[4] = _dihedral_cosine(n0x, n0y, n0z, l0, n2x, n2y, n2z, l2)  # 13
+    cosines[5] = _dihedral_cosine(n0x, n0y, n0z, l0, n1x, n1y, n1z, l1)  # 23
     area = 0.5 * (l0 + l1 + l2 + l3)
     # Opposite edge pairs (01, 23), (02, 13), (03, 12).
     l01 = math.sqrt(bx * bx + by * by + bz * bz)
@@ -76,19 +79,24 @@ def _measure_tet(points, tets, t, angles):
     return vol, ratio
 
 
+@nb.njit(cache=True, inline="always")
+def _degrees(cosine):
+    return math.degrees(math.acos(cosine))
+
+
 @nb.njit(cache=True, parallel=True)
 def _tet_quality(points, tets, volume, radius_ratio, min_dihedral, max_dihedral):
     for t in nb.prange(tets.shape[0]):
-        angles = np.empty(6)
-        vol, ratio = _measure_tet(points, tets, t, angles)
+        cosines = np.empty(6)
+        vol, ratio = _measure_tet(points, tets, t, cosines)
         volume[t] = vol
         radius_ratio[t] = ratio
         if vol <= 0.0:
             min_dihedral[t] = 0.0
             max_dihedral[t] = 180.0
         else:
-            min_dihedral[t] = angles.min()
-            max_dihedral[t] = angles.max()
+            min_dihedral[t] = _degrees(cosines.max())
+            max_dihedral[t] = _degrees(cosines.min())
 
 
 @dataclass(frozen=True)
@@ -121,6 +129,8 @@ def tet_dihedral_angles(points, tets):
     out = np.empty((tets.shape[0], 6))
     for t in range(tets.shape[0]):
         _measure_tet(points, tets, t, out[t])
+        for i in range(6):
+            out[t, i] = _degrees(out[t, i])
     return out
 
 
@@ -135,31 +145,32 @@ def _summarize(points, tets, core, fat_ratio, partial, fat_count):
     m = tets.shape[0]
     n_chunks = partial.shape[0]
     for c in nb.prange(n_chunks):
-        angles = np.empty(6)
+        cosines = np.empty(6)
         lo = m * c // n_chunks
         hi = m * (c + 1) // n_chunks
-        mn, mx, rmin, vsum, imn, imx = 180.0, 0.0, np.inf, 0.0, 180.0, 0.0
+        # Extremes as cosines: the smallest angle has the largest cosine.
+        cmax, cmin, rmin, vsum, icmax, icmin = -1.0, 1.0, np.inf, 0.0, -1.0, 1.0
         fat = 0
         for t in range(lo, hi):
-            vol, ratio = _measure_tet(points, tets, t, angles)
-            a_min, a_max = angles.min(), angles.max()
+            vol, ratio = _measure_tet(points, tets, t, cosines)
+            c_hi, c_lo = cosines.max(), cosines.min()
             if vol <= 0.0:
-                a_min, a_max = 0.0, 180.0
-            mn = min(mn, a_min)
-            mx = max(mx, a_max)
+                c_hi, c_lo = 1.0, -1.0
+            cmax = max(cmax, c_hi)
+            cmin = min(cmin, c_lo)
             rmin = min(rmin, ratio)
             vsum += vol
             if abs(ratio - fat_ratio) < 1e-9:
                 fat += 1
             if core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]]:
-                imn = min(imn, a_min)
-                imx = max(imx, a_max)
-        partial[c, 0] = mn
-        partial[c, 1] = mx
+                icmax = max(icmax, c_hi)
+                icmin = min(icmin, c_lo)
+        partial[c, 0] = _degrees(cmax)
+        partial[c, 1] = _degrees(cmin)
         partial[c, 2] = rmin
         partial[c, 3] = vsum
-        partial[c, 4] = imn
-        partial[c, 5] = imx
+        partial[c, 4] = _degrees(icmax) if icmax >= icmin else 180.0
+        partial[c, 5] = _degrees(icmin) if icmax >= icmin else 0.0
         fat_count[c] = fat
 
 

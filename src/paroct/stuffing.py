@@ -378,6 +378,11 @@ def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touche
         scratch = np.empty((4, 6), dtype=np.int64)
         for t in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
             k = offsets[t]
+            if signs[tets[t, 0]] > 0 and signs[tets[t, 1]] > 0 and signs[tets[t, 2]] > 0 and signs[tets[t, 3]] > 0:
+                for i in range(4):  # the common case, a lattice tet wholly inside: copied
+                    out[k, i] = tets[t, i]
+                touched[k] = False
+                continue
             cut = _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch)
             for i in range(k, offsets[t + 1]):
                 touched[i] = cut
