@@ -442,10 +442,26 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
 
 def _compact(points, tets):
     """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order."""
-    used = np.zeros(points.shape[0], dtype=bool)
-    used[tets.ravel()] = True
-    new_id = (np.cumsum(used) - 1).astype(np.int32)
-    return np.ascontiguousarray(points[used]), _renumber(tets, new_id)
+    new_id, n_used = _used_ids(tets, points.shape[0])
+    kept = np.empty((n_used, 3))
+    kept[new_id[new_id >= 0]] = points[new_id >= 0]
+    return kept, _renumber(tets, new_id)
+
+
+@nb.njit(cache=True)
+def _used_ids(tets, n_points):
+    """New id (n_points,) int32 of each point that a tet uses, in point order, -1 for the others;
+    and the number used."""
+    new_id = np.full(n_points, -1, dtype=np.int32)
+    for t in range(tets.shape[0]):
+        for i in range(4):
+            new_id[tets[t, i]] = 0
+    n = 0
+    for v in range(n_points):
+        if new_id[v] == 0:
+            new_id[v] = n
+            n += 1
+    return new_id, n
 
 
 @nb.njit(cache=True, parallel=True)

@@ -218,44 +218,71 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces[order])
 
 
-def lattice_rows(points: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Row (p2, p3) and position t of lattice points (N, 3) int64 on rows of a direction."""
-    tu = points @ row_basis(direction).T
-    return tu[:, 1], tu[:, 2], tu[:, 0]
-
-
 def winding_numbers(crossings: RowCrossings, points: np.ndarray) -> np.ndarray:
     """Winding number (N,) int32 of each lattice point (moved by -eps along the direction)."""
-    r2, r3, t = lattice_rows(points, crossings.direction)
+    points = np.ascontiguousarray(points, dtype=np.int64)
     csum = np.zeros(crossings.keys.shape[0] + 1, dtype=np.int64)
     np.cumsum(crossings.signs, out=csum[1:])
-    at = np.searchsorted(crossings.keys, _pack_np(r2, r3, t), side="left")
-    row_start = np.searchsorted(crossings.keys, _pack_np(r2, r3, np.full_like(t, -_KEY_OFFSET)), side="left")
-    return (csum[at] - csum[row_start]).astype(np.int32)
+    out = np.empty(points.shape[0], dtype=np.int32)
+    _winding_numbers(crossings.keys, csum, row_basis(crossings.direction), points, out)
+    return out
 
 
-def _pack_np(r2, r3, j):
-    return ((r2 + _KEY_OFFSET) << (2 * _KEY_BITS)) | ((r3 + _KEY_OFFSET) << _KEY_BITS) | (j + _KEY_OFFSET)
+@nb.njit(cache=True, inline="always")
+def _lower_bound(keys, key, lo, hi):
+    """First index in keys[lo:hi] (sorted) whose key is >= key, or hi."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
-@nb.njit(cache=True)
-def _pick_cuts(keys, fracs, lo, hi, next_lo, next_hi, start_inside):
-    """Per edge: the crossing in its cell nearest the inside endpoint, else a crossing exactly at its far end."""
-    n = lo.shape[0]
-    out = np.empty(n, dtype=np.float64)
-    status = np.zeros(n, dtype=np.int8)
-    for e in range(n):
-        if hi[e] > lo[e]:
-            if start_inside[e]:
-                out[e] = fracs[lo[e]]
-            else:
-                out[e] = fracs[hi[e] - 1]
-        elif next_hi[e] > next_lo[e] and fracs[next_lo[e]] == 0.0:
+@nb.njit(cache=True, parallel=True)
+def _winding_numbers(keys, csum, basis, points, out):
+    """out[i] = sum of the crossing signs (prefix sums csum) on point i's row in cells before it.
+
+    One binary search finds the row; the point's cell is then found by galloping from the row's
+    start (rows hold a few crossings), so the second search costs O(log crossings in the row)."""
+    n = keys.shape[0]
+    for i in nb.prange(points.shape[0]):
+        t = basis[0, 0] * points[i, 0] + basis[0, 1] * points[i, 1] + basis[0, 2] * points[i, 2]
+        r2 = basis[1, 0] * points[i, 0] + basis[1, 1] * points[i, 1] + basis[1, 2] * points[i, 2]
+        r3 = basis[2, 0] * points[i, 0] + basis[2, 1] * points[i, 1] + basis[2, 2] * points[i, 2]
+        start = _lower_bound(keys, _pack(r2, r3, -_KEY_OFFSET), 0, n)
+        key = _pack(r2, r3, t)
+        step = 1
+        hi = start
+        while hi < n and keys[hi] < key:
+            hi = start + step
+            step *= 2
+        at = _lower_bound(keys, key, start + step // 4, min(hi, n))
+        out[i] = csum[at] - csum[start]
+
+
+@nb.njit(cache=True, parallel=True)
+def _edge_cuts(keys, fracs, basis, starts, start_inside, out, status):
+    """Per edge from starts[e] one step along the direction: the crossing in its cell nearest
+    the inside end, else a crossing exactly at its far end (fraction 1), else the midpoint with
+    status 1."""
+    n = keys.shape[0]
+    for e in nb.prange(starts.shape[0]):
+        t = basis[0, 0] * starts[e, 0] + basis[0, 1] * starts[e, 1] + basis[0, 2] * starts[e, 2]
+        r2 = basis[1, 0] * starts[e, 0] + basis[1, 1] * starts[e, 1] + basis[1, 2] * starts[e, 2]
+        r3 = basis[2, 0] * starts[e, 0] + basis[2, 1] * starts[e, 1] + basis[2, 2] * starts[e, 2]
+        key = _pack(r2, r3, t)
+        lo = _lower_bound(keys, key, 0, n)
+        hi = _lower_bound(keys, key + 1, lo, n)  # keys are integers: key + 1 is cell t + 1
+        status[e] = 0
+        if hi > lo:
+            out[e] = fracs[lo] if start_inside[e] else fracs[hi - 1]
+        elif hi < n and keys[hi] == key + 1 and fracs[hi] == 0.0:
             out[e] = 1.0
         else:
             out[e] = 0.5
             status[e] = 1
-    return out, status
 
 
 def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray, start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -266,8 +293,9 @@ def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray, start_inside
     end, unresolved (E,) int8 = 1 where the rows found no crossing, which only happens for
     edges with an endpoint exactly on the surface, resolved here to the midpoint).
     """
-    r2, r3, t = lattice_rows(starts, crossings.direction)
-    lo = np.searchsorted(crossings.keys, _pack_np(r2, r3, t), side="left")
-    hi = np.searchsorted(crossings.keys, _pack_np(r2, r3, t), side="right")
-    next_hi = np.searchsorted(crossings.keys, _pack_np(r2, r3, t + 1), side="right")
-    return _pick_cuts(crossings.keys, crossings.fracs, lo, hi, hi, next_hi, np.ascontiguousarray(start_inside))
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    out = np.empty(starts.shape[0], dtype=np.float64)
+    status = np.empty(starts.shape[0], dtype=np.int8)
+    _edge_cuts(crossings.keys, crossings.fracs, row_basis(crossings.direction), starts,
+               np.ascontiguousarray(start_inside, dtype=np.bool_), out, status)
+    return out, status

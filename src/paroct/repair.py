@@ -162,6 +162,16 @@ def _repair(tets, neighbour, bad_vertices, n_vertices, complete):
     return alive, True
 
 
+@nb.njit(cache=True, parallel=True)
+def band_mask(tets, core):
+    """Mask (M,) of the tets with a vertex that is not core (core[tets].all(axis=1) negated,
+    without its (M, 4) temporary)."""
+    out = np.empty(tets.shape[0], dtype=np.bool_)
+    for t in nb.prange(tets.shape[0]):
+        out[t] = not (core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]])
+    return out
+
+
 def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Boundary faces of a stuffed mesh from its band alone.
 
@@ -170,7 +180,7 @@ def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.nd
     sides).  Only tets with a non-core vertex, the band, can then have boundary faces.
     Returns (band (M,) mask, band face neighbours (B, 4) indexing tets[band], boundary faces (F, 3)).
     """
-    band = ~core[tets].all(axis=1)
+    band = band_mask(tets, core)
     band_tets = np.ascontiguousarray(tets[band])
     neighbour, _, _ = match_faces(band_tets)
     faces = boundary_faces(band_tets, neighbour)
@@ -192,7 +202,7 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int,
         return tets, 0, faces
     tets = np.ascontiguousarray(tets)
     # Work on the band and one ring of tets around it: the stars of all band vertices.
-    band = ~core[tets].all(axis=1)
+    band = band_mask(tets, core)
     band_vertex = np.zeros(core.shape[0], dtype=bool)
     band_vertex[tets[band].ravel()] = True
     local = band_vertex[tets].any(axis=1)
