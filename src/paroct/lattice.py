@@ -14,6 +14,7 @@ import numpy as np
 
 from .frame import CUBE_CORNERS
 from .octant import morton_key
+from numba.extending import overload
 from .transitions import (
     CHAIN_IS_ODD,
     CHAIN_SPLITS,
@@ -25,10 +26,13 @@ from .transitions import (
 )
 
 _EMPTY = np.int64(-1)
-#: Number leaf corners through a dense box index when the box has at most this many
-#: lattice points per leaf (12 bytes each), else through a hash table.
-DENSE_SLOTS_PER_LEAF = 8
+#: Number leaf corners through a dense box index (4 bytes a lattice point of the leaves' box,
+#: in bricks of 8^3) when the box has at most this many points per leaf, else through a hash
+#: table (16 bytes a slot, at least 8 slots a leaf).
+DENSE_SLOTS_PER_LEAF = 24
 _FIB = np.uint64(0x9E3779B97F4A7C15)
+#: Bits of a 3-bit coordinate spread to every third bit: a point's Morton index in its brick.
+_SPREAD3 = np.array([0, 1, 8, 9, 64, 65, 72, 73], dtype=np.int64)
 
 
 @nb.njit(cache=True, inline="always")
@@ -40,59 +44,89 @@ def _slot(key, bits):
     return np.int64((k ^ (k >> np.uint64(bits)) ^ ((k * _FIB) >> np.uint64(64 - bits))) & np.uint64((1 << bits) - 1))
 
 
-@nb.njit(cache=True)
-def _insert(table_keys, table_vals, mask, key, slot, next_id):
-    """Open-addressing insert from a first slot; returns (id of key, whether it was new)."""
-    s = slot
-    while True:
-        k = table_keys[s]
-        if k == key:
-            return table_vals[s], False
-        if k == _EMPTY:
-            table_keys[s] = key
-            table_vals[s] = next_id
-            return next_id, True
-        s = (s + 1) & mask
+@nb.njit(cache=True, inline="always")
+def _dense_slot(x, y, z, box_lo, bricks):
+    """Index of a point of the box in the brick layout: 8^3 bricks in x-fastest order, Morton
+    order inside a brick, so leaves visited in Morton order touch few cache lines."""
+    dx = x - box_lo[0]
+    dy = y - box_lo[1]
+    dz = z - box_lo[2]
+    brick = ((dz >> 3) * bricks[1] + (dy >> 3)) * bricks[0] + (dx >> 3)
+    return (brick << 9) | _SPREAD3[dx & 7] | (_SPREAD3[dy & 7] << 1) | (_SPREAD3[dz & 7] << 2)
+
+
+def _vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
+    """Id of lattice point (x, y, z) in the vertex table, adding it as next_id when absent and
+    ``add``; returns (id or -1, whether it was added).
+
+    The table's type picks the lookup when the caller compiles, so each specialization holds
+    one branch (a run-time test between the two made the dense loop 6x slower):
+    1-D int32: the dense box table (_dense_slot), -1 where empty.
+    2-D int64 (S, 2): open addressing on Morton keys, rows (key, id), key -1 where empty,
+    S = 2**bits.
+    """
+    raise NotImplementedError("compiled only: see _overload_vertex_id")
+
+
+@overload(_vertex_id, inline="always")
+def _overload_vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
+    if table.ndim == 1:
+        def dense(table, bits, bricks, box_lo, x, y, z, next_id, add):
+            s = _dense_slot(x, y, z, box_lo, bricks)
+            vid = table[s]
+            if vid >= 0 or not add:
+                return np.int64(vid), False
+            table[s] = next_id
+            return np.int64(next_id), True
+        return dense
+
+    def hashed(table, bits, bricks, box_lo, x, y, z, next_id, add):
+        key = morton_key(x, y, z)
+        mask = (np.int64(1) << bits) - 1
+        s = _slot(key, bits)
+        while True:
+            k = table[s, 0]
+            if k == key:
+                return table[s, 1], False
+            if k == _EMPTY:
+                if not add:
+                    return np.int64(-1), False
+                table[s, 0] = key
+                table[s, 1] = next_id
+                return np.int64(next_id), True
+            s = (s + 1) & mask
+    return hashed
+
+
+def _grow_table(table, bits, count):
+    """(table, bits): a hash vertex table doubled (_rehash) once it holds more than half its
+    rows in count entries; a dense table as it is."""
+    raise NotImplementedError("compiled only: see _overload_grow_table")
+
+
+@overload(_grow_table, inline="always")
+def _overload_grow_table(table, bits, count):
+    if table.ndim == 1:
+        return lambda table, bits, count: (table, bits)
+
+    def grow(table, bits, count):
+        if 2 * count > table.shape[0]:
+            return _rehash(table, bits)
+        return table, bits
+    return grow
 
 
 @nb.njit(cache=True, inline="always")
-def _first_slot(x, y, z, key, dense, box_lo, box_dims, bits):
-    if dense:
-        return (x - box_lo[0]) + box_dims[0] * ((y - box_lo[1]) + box_dims[1] * (z - box_lo[2]))
-    return _slot(key, bits)
-
-
-@nb.njit(cache=True)
-def _find(table_keys, table_vals, mask, key, slot):
-    """Id of key in the open-addressing table, or -1."""
-    s = slot
-    while True:
-        k = table_keys[s]
-        if k == key:
-            return table_vals[s]
-        if k == _EMPTY:
-            return -1
-        s = (s + 1) & mask
-
-
-@nb.njit(cache=True, inline="always")
-def _record(table_keys, table_vals, bits, dense, coords, count, x, y, z):
-    """After an insert that made a new vertex: store its coordinates (growing the array) and
-    grow the hash table when half full.  Returns (table_keys, table_vals, bits, mask, coords, count)."""
-    if count == coords.shape[0]:
-        coords = _grow(coords, count)
+def _add(coords, count, x, y, z):
+    """Store the coordinates of the vertex _vertex_id just added; returns the new count."""
     coords[count, 0] = x
     coords[count, 1] = y
     coords[count, 2] = z
-    count += 1
-    if not dense and 2 * count > table_keys.shape[0]:
-        table_keys, table_vals, bits = _rehash(table_keys, table_vals, bits)
-    mask = np.int64(-1) if dense else (np.int64(1) << bits) - 1
-    return table_keys, table_vals, bits, mask, coords, count
+    return count + 1
 
 
 @nb.njit(cache=True)
-def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, face_edges):
+def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_offsets, face_edges):
     """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
     (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
     lattice coordinates (V, 3) of the vertices.
@@ -100,43 +134,32 @@ def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, fa
     The prefix points (P, 3) get ids 0..P-1; then corners are numbered in leaf order; then,
     for each coarse leaf in order, the centres of its faces with a split cube edge (the eager
     face-centre rule).
-    box_dims[0] > 0: every vertex lies in the box box_lo + [0, box_dims), and its linear
-    index there is a collision-free slot; otherwise slots come from _slot and the table grows.
+    table: an empty vertex table (_vertex_id): dense over the box box_lo + 8 * bricks, which
+    then holds every vertex, or hashed with 2**bits rows, grown as it fills.
     """
     n = anchors.shape[0]
-    dense = box_dims[0] > 0
-    if dense:
-        size = box_dims[0] * box_dims[1] * box_dims[2]
-        bits = 0
-        mask = np.int64(-1)
-    else:
-        bits = 4
-        while (np.int64(1) << bits) < 4 * n + prefix.shape[0] + 16:
-            bits += 1
-        size = np.int64(1) << bits
-        mask = size - 1
-    table_keys = np.full(size, _EMPTY, dtype=np.int64)
-    table_vals = np.empty(size, dtype=np.int32)
     corner_ids = np.empty((n, 8), dtype=np.int32)
-    coords = np.empty((4 * n + prefix.shape[0] + 16, 3), dtype=np.int64)
+    # Room for every prefix point and corner (untouched pages cost nothing); arrays are only
+    # reassigned when the hash table grows, never per vertex.
+    coords = np.empty((8 * n + prefix.shape[0], 3), dtype=np.int64)
     count = 0
     for i in range(prefix.shape[0]):
         x = prefix[i, 0]
         y = prefix[i, 1]
         z = prefix[i, 2]
-        key = morton_key(x, y, z)
-        _, new = _insert(table_keys, table_vals, mask, key, _first_slot(x, y, z, key, dense, box_lo, box_dims, bits), count)
+        _, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
         if new:
-            table_keys, table_vals, bits, mask, coords, count = _record(table_keys, table_vals, bits, dense, coords, count, x, y, z)
+            count = _add(coords, count, x, y, z)
+            table, bits = _grow_table(table, bits, count)
     for i in range(n):
         for c in range(8):
             x = anchors[i, 0] + sides[i] * CUBE_CORNERS[c, 0]
             y = anchors[i, 1] + sides[i] * CUBE_CORNERS[c, 1]
             z = anchors[i, 2] + sides[i] * CUBE_CORNERS[c, 2]
-            key = morton_key(x, y, z)
-            vid, new = _insert(table_keys, table_vals, mask, key, _first_slot(x, y, z, key, dense, box_lo, box_dims, bits), count)
+            vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
             if new:
-                table_keys, table_vals, bits, mask, coords, count = _record(table_keys, table_vals, bits, dense, coords, count, x, y, z)
+                count = _add(coords, count, x, y, z)
+                table, bits = _grow_table(table, bits, count)
             corner_ids[i, c] = vid
     split_row = np.full(n, -1, dtype=np.int64)
     n_coarse = 0
@@ -145,6 +168,8 @@ def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, fa
             split_row[i] = n_coarse
             n_coarse += 1
     split_ids = np.full((n_coarse, 18), -1, dtype=np.int32)
+    if n_coarse:
+        coords = _grow(coords, count, count + 6 * n_coarse)
     for i in range(n):
         r = split_row[i]
         if r < 0:
@@ -154,40 +179,45 @@ def _number_vertices(anchors, sides, prefix, box_lo, box_dims, split_offsets, fa
             x = anchors[i, 0] + half * split_offsets[p, 0]
             y = anchors[i, 1] + half * split_offsets[p, 1]
             z = anchors[i, 2] + half * split_offsets[p, 2]
-            key = morton_key(x, y, z)
-            slot = _first_slot(x, y, z, key, dense, box_lo, box_dims, bits)
             if p < 12:
-                split_ids[r, p] = _find(table_keys, table_vals, mask, key, slot)
+                split_ids[r, p], _ = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, False)
                 continue
             split = False
             for e in face_edges[p - 12]:
                 split |= split_ids[r, e] >= 0
             if not split:
                 continue
-            vid, new = _insert(table_keys, table_vals, mask, key, slot, count)
+            vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
             if new:
-                table_keys, table_vals, bits, mask, coords, count = _record(table_keys, table_vals, bits, dense, coords, count, x, y, z)
+                count = _add(coords, count, x, y, z)
+                table, bits = _grow_table(table, bits, count)
             split_ids[r, p] = vid
     return corner_ids, split_row, split_ids, coords[:count].copy()
 
 
 @nb.njit(cache=True)
-def _grow(coords, count):
-    grown = np.empty((2 * count, 3), dtype=np.int64)
-    grown[:count] = coords
+def _grow(coords, count, capacity):
+    """coords with its first count rows kept and room for capacity rows."""
+    grown = np.empty((capacity, 3), dtype=np.int64)
+    grown[:count] = coords[:count]
     return grown
 
 
 @nb.njit(cache=True)
-def _rehash(table_keys, table_vals, bits):
+def _rehash(table, bits):
+    """A hash vertex table with twice the rows, holding the same entries: (table, bits)."""
     new_bits = bits + 1
-    new_keys = np.full(np.int64(1) << new_bits, _EMPTY, dtype=np.int64)
-    new_vals = np.empty(np.int64(1) << new_bits, dtype=np.int32)
+    grown = np.full((np.int64(1) << new_bits, 2), _EMPTY, dtype=np.int64)
     mask = (np.int64(1) << new_bits) - 1
-    for s in range(table_keys.shape[0]):
-        if table_keys[s] != _EMPTY:
-            _insert(new_keys, new_vals, mask, table_keys[s], _slot(table_keys[s], new_bits), table_vals[s])
-    return new_keys, new_vals, new_bits
+    for s in range(table.shape[0]):
+        key = table[s, 0]
+        if key != _EMPTY:
+            t = _slot(key, new_bits)
+            while grown[t, 0] != _EMPTY:
+                t = (t + 1) & mask
+            grown[t, 0] = key
+            grown[t, 1] = table[s, 1]
+    return grown, new_bits
 
 
 @nb.njit(cache=True, inline="always")
@@ -284,14 +314,23 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
         raise ValueError(f"anchors.shape = {anchors.shape}, sides.shape = {sides.shape}; expected (L, 3) and (L,)")
     box_lo = np.zeros(3, dtype=np.int64)
-    box_dims = np.zeros(3, dtype=np.int64)
+    bricks = np.zeros(3, dtype=np.int64)
     if anchors.shape[0]:
         box_lo = anchors.min(axis=0)
-        box_dims = (anchors + sides[:, None]).max(axis=0) + 1 - box_lo
-        if np.prod(box_dims.astype(np.float64)) > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
-            box_dims = np.zeros(3, dtype=np.int64)
+        box_hi = (anchors + sides[:, None]).max(axis=0)
+        if prefix is not None and len(prefix):
+            box_lo = np.minimum(box_lo, np.min(prefix, axis=0))
+            box_hi = np.maximum(box_hi, np.max(prefix, axis=0))
+        bricks = (box_hi - box_lo + 8) // 8
+        if np.prod(bricks.astype(np.float64)) * 512 > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
+            bricks = np.zeros(3, dtype=np.int64)
     prefix = np.zeros((0, 3), dtype=np.int64) if prefix is None else np.ascontiguousarray(prefix, dtype=np.int64)
-    return LeafVertices(*_number_vertices(anchors, sides, prefix, box_lo, box_dims, SPLIT_POINT_OFFSETS, FACE_EDGES))
+    if bricks[0] > 0:
+        table, bits = np.full(int(np.prod(bricks)) * 512, -1, dtype=np.int32), 0
+    else:
+        bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
+        table = np.full((1 << bits, 2), _EMPTY, dtype=np.int64)
+    return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, SPLIT_POINT_OFFSETS, FACE_EDGES))
 
 
 def graded_tets(vertices: LeafVertices, marked: np.ndarray | None = None) -> np.ndarray:
