@@ -214,8 +214,31 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     signs = np.empty(total, dtype=np.int8)
     hit_faces = np.empty(total, dtype=np.int32)
     _row_hits(tri_coords, bits, offsets, keys, fracs, signs, hit_faces, np.empty(0, dtype=np.int64))
-    order = np.lexsort((hit_faces, fracs, keys))
+    order = np.argsort(keys, kind="stable")
+    _order_cells(keys, fracs, hit_faces, order)
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces[order])
+
+
+@nb.njit(cache=True)
+def _order_cells(keys, fracs, faces, order):
+    """Sort ``order`` (already sorted by key) by (fraction, face) within each run of equal
+    keys: an insertion sort, as a cell of a row holds a crossing or two (np.lexsort on the
+    three columns cost half of row_crossings)."""
+    start = 0
+    n = order.shape[0]
+    while start < n:
+        end = start + 1
+        while end < n and keys[order[end]] == keys[order[start]]:
+            end += 1
+        for i in range(start + 1, end):
+            o = order[i]
+            j = i
+            while j > start and (fracs[order[j - 1]] > fracs[o]
+                                 or (fracs[order[j - 1]] == fracs[o] and faces[order[j - 1]] > faces[o])):
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = o
+        start = end
 
 
 def winding_numbers(crossings: RowCrossings, points: np.ndarray) -> np.ndarray:
