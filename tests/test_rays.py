@@ -123,3 +123,57 @@ def test_cut_fractions_lie_on_the_surface():
         local = x @ _rotation(np.random.default_rng(3))
         dist = np.min(np.abs(np.concatenate([local, local - 1], axis=1)), axis=1)
         assert dist.max() < 1e-6
+
+
+def _row_sums_reference(crossings, points):
+    """Slow twin of winding_numbers: per point, the signs of the crossings on its row in cells before it."""
+    T = row_basis(crossings.direction)
+    off = rays._KEY_OFFSET
+    rows = {}
+    for key, sign in zip(crossings.keys.tolist(), crossings.signs.tolist()):
+        row, cell = key >> rays._KEY_BITS, (key & ((1 << rays._KEY_BITS) - 1)) - off
+        rows.setdefault(row, []).append((cell, sign))
+    out = []
+    for p in points:
+        t, r2, r3 = (int(x) for x in T @ p)
+        row = ((r2 + off) << rays._KEY_BITS) | (r3 + off)
+        out.append(sum(s for cell, s in rows.get(row, []) if cell < t))
+    return np.array(out)
+
+
+def test_winding_numbers_and_cut_search_on_rows_with_many_crossings():
+    # Twelve disjoint slabs along x: rows cross up to 24 triangles, so the galloping search runs long.
+    boxes = [_box_surface(np.array([0.3 * k, 0.0, 0.0]), np.array([0.3 * k + 0.17, 1.0, 0.8])) for k in range(12)]
+    v = np.concatenate([b[0] for b in boxes])
+    f = np.concatenate([b[1] + 8 * k for k, b in enumerate(boxes)])
+    frame = fat_frame(v.min(0), v.max(0), 0.05)
+    snapped = rays.snap_surface(frame, v)
+    rng = np.random.default_rng(5)
+    # Lattice points of the slabs' box (the root cube is mostly empty) and a few beyond it.
+    lo = np.floor(frame.to_lattice(v).min(0)).astype(np.int64) - 2
+    hi = np.ceil(frame.to_lattice(v).max(0)).astype(np.int64) + 2
+    points = rng.integers(lo, hi, size=(3000, 3))
+    for d in (X_AXIS_DIRECTION, 0, 3, 6):
+        crossings = rays.row_crossings(frame, snapped, f, d)
+        if d == X_AXIS_DIRECTION:  # the space x axis: through every slab
+            assert np.unique(crossings.keys >> rays._KEY_BITS, return_counts=True)[1].max() >= 24
+        assert np.array_equal(rays.winding_numbers(crossings, points), _row_sums_reference(crossings, points))
+
+
+def test_crossings_are_ordered_by_row_cell_fraction_and_face():
+    # Rows through the box's vertices and edges give crossings that tie in cell and fraction.
+    from paroct.frame import FatFrame
+
+    frame = FatFrame(origin=np.zeros(3), h=1.0, levels=6)
+    v, f = _box_surface(np.array([4.0, 4.0, 4.0]), np.array([12.0, 10.0, 8.0]))
+    snapped = rays.snap_surface(frame, v)
+    for d in range(7):
+        c = rays.row_crossings(frame, snapped, f, d)
+        assert np.array_equal(np.lexsort((c.faces, c.fracs, c.keys)), np.arange(c.keys.size))
+    # The in-cell insertion sort against np.lexsort on random columns full of ties.
+    keys = RNG.integers(0, 40, size=5000)
+    fracs = RNG.integers(0, 4, size=5000) / 4.0
+    faces = RNG.integers(0, 30, size=5000).astype(np.int32)
+    order = np.argsort(keys, kind="stable")
+    rays._order_cells(keys, fracs, faces, order)
+    assert np.array_equal(order, np.lexsort((faces, fracs, keys)))

@@ -137,7 +137,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
         _err(f"{stage} done")
 
     if not args.quiet and not _kernels_cached():
-        _err("compiling the numba kernels on this first run (about 20 s on 2 cores; cached afterwards)")
+        _err("compiling the numba kernels on this first run (about a minute on 2 cores; cached afterwards)")
     t0 = time.perf_counter()
     regions = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
     regions += [Sphere(center=tuple(b[:3]), radius=b[3], size=b[4]) for b in args.refine_sphere]
