@@ -84,17 +84,15 @@ def _overload_vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
         key = morton_key(x, y, z)
         mask = (np.int64(1) << bits) - 1
         s = _slot(key, bits)
-        while True:
-            k = table[s, 0]
-            if k == key:
-                return table[s, 1], False
-            if k == _EMPTY:
-                if not add:
-                    return np.int64(-1), False
-                table[s, 0] = key
-                table[s, 1] = next_id
-                return np.int64(next_id), True
+        while table[s, 0] != key and table[s, 0] != _EMPTY:
             s = (s + 1) & mask
+        if table[s, 0] == key:
+            return table[s, 1], False
+        if not add:
+            return np.int64(-1), False
+        table[s, 0] = key
+        table[s, 1] = next_id
+        return np.int64(next_id), True
     return hashed
 
 

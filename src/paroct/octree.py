@@ -164,13 +164,21 @@ def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, le
 
 
 @nb.njit(cache=True, inline="always")
-def _axis_separates(ax, ay, az, v0, v1, v2, half):
-    """True iff the axis separates the triangle (vertices relative to the box centre) from the box."""
-    p0 = ax * v0[0] + ay * v0[1] + az * v0[2]
-    p1 = ax * v1[0] + ay * v1[1] + az * v1[2]
-    p2 = ax * v2[0] + ay * v2[1] + az * v2[2]
+def _axis_separates(ax, ay, az, ux, uy, uz, vx, vy, vz, wx, wy, wz, half):
+    """True iff the axis separates the triangle u, v, w (relative to the box centre) from the box."""
+    p0 = ax * ux + ay * uy + az * uz
+    p1 = ax * vx + ay * vy + az * vz
+    p2 = ax * wx + ay * wy + az * wz
     r = half * (abs(ax) + abs(ay) + abs(az))
     return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_axes_separate(ex, ey, ez, ux, uy, uz, vx, vy, vz, wx, wy, wz, half):
+    """True iff a cross product of the triangle edge e with a box axis separates them."""
+    return (_axis_separates(0.0, -ez, ey, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
+            or _axis_separates(ez, 0.0, -ex, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
+            or _axis_separates(-ey, ex, 0.0, ux, uy, uz, vx, vy, vz, wx, wy, wz, half))
 
 
 @nb.njit(cache=True)
@@ -179,34 +187,30 @@ def triangle_meets_cube(tri, lo, side):
 
     Separating-axis test (Akenine-Moller 2001): the cube's 3 normals, the triangle's
     normal and the 9 cross products of their edges.  Float; callers widen the cube by a
-    margin so that rounding can only add cubes.
+    margin so that rounding can only add cubes.  Scalars only: it runs once a candidate cell.
     """
     half = 0.5 * side
-    v = np.empty((3, 3))
-    for k in range(3):
-        for i in range(3):
-            v[k, i] = tri[k, i] - (lo[i] + half)
-    for i in range(3):
-        if min(v[0, i], v[1, i], v[2, i]) > half or max(v[0, i], v[1, i], v[2, i]) < -half:
-            return False
-    e = np.empty((3, 3))
-    for k in range(3):
-        for i in range(3):
-            e[k, i] = v[(k + 1) % 3, i] - v[k, i]
-    nx = e[0, 1] * e[1, 2] - e[0, 2] * e[1, 1]
-    ny = e[0, 2] * e[1, 0] - e[0, 0] * e[1, 2]
-    nz = e[0, 0] * e[1, 1] - e[0, 1] * e[1, 0]
-    if _axis_separates(nx, ny, nz, v[0], v[1], v[2], half):
+    cx, cy, cz = lo[0] + half, lo[1] + half, lo[2] + half
+    ux, uy, uz = tri[0, 0] - cx, tri[0, 1] - cy, tri[0, 2] - cz
+    vx, vy, vz = tri[1, 0] - cx, tri[1, 1] - cy, tri[1, 2] - cz
+    wx, wy, wz = tri[2, 0] - cx, tri[2, 1] - cy, tri[2, 2] - cz
+    if min(ux, vx, wx) > half or max(ux, vx, wx) < -half:
         return False
-    for k in range(3):
-        # cross(unit axis i, edge k)
-        if _axis_separates(0.0, -e[k, 2], e[k, 1], v[0], v[1], v[2], half):
-            return False
-        if _axis_separates(e[k, 2], 0.0, -e[k, 0], v[0], v[1], v[2], half):
-            return False
-        if _axis_separates(-e[k, 1], e[k, 0], 0.0, v[0], v[1], v[2], half):
-            return False
-    return True
+    if min(uy, vy, wy) > half or max(uy, vy, wy) < -half:
+        return False
+    if min(uz, vz, wz) > half or max(uz, vz, wz) < -half:
+        return False
+    e0x, e0y, e0z = vx - ux, vy - uy, vz - uz
+    e1x, e1y, e1z = wx - vx, wy - vy, wz - vz
+    e2x, e2y, e2z = ux - wx, uy - wy, uz - wz
+    nx = e0y * e1z - e0z * e1y
+    ny = e0z * e1x - e0x * e1z
+    nz = e0x * e1y - e0y * e1x
+    if _axis_separates(nx, ny, nz, ux, uy, uz, vx, vy, vz, wx, wy, wz, half):
+        return False
+    return not (_edge_axes_separate(e0x, e0y, e0z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
+                or _edge_axes_separate(e1x, e1y, e1z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
+                or _edge_axes_separate(e2x, e2y, e2z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half))
 
 
 @nb.njit(cache=True)
@@ -221,12 +225,12 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
     tri = np.empty((3, 3))
     lo = np.empty(3)
     cell = np.empty(3, dtype=np.int64)
+    c0 = np.empty(3, dtype=np.int64)
+    c1 = np.empty(3, dtype=np.int64)
     for f in range(faces.shape[0]):
         for k in range(3):
             for i in range(3):
                 tri[k, i] = snapped[faces[f, k], i] / unit
-        c0 = np.empty(3, dtype=np.int64)
-        c1 = np.empty(3, dtype=np.int64)
         for i in range(3):
             # Cells whose widened box meets the triangle's box (exact in floats: side is a power of two).
             c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) - 2 * margin) / side))

@@ -149,36 +149,46 @@ def _pack(r2, r3, j):
     return ((r2 + _KEY_OFFSET) << (2 * _KEY_BITS)) | ((r3 + _KEY_OFFSET) << _KEY_BITS) | (j + _KEY_OFFSET)
 
 
+#: Triangles are processed in this many chunks; each owns a scratch triangle.
+_ROW_HIT_CHUNKS = 64
+
+
 @nb.njit(cache=True, parallel=True)
-def _row_hits(tri_coords, unit_bits, offsets, keys, fracs, signs, faces, counts):
-    """Crossings of every triangle with the rows its projection covers.
+def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, counts):
+    """Crossings of every triangle (vertex ids (F, 3) into coords (V, 3), row coordinates)
+    with the rows its projection covers.
 
     Two passes over the same loop: with ``counts`` (len F) it only counts each triangle's hits;
     otherwise it writes them from offsets[f] on (count, prefix sum, fill: each thread owns its
     triangles' slots).
     """
     counting = counts.shape[0] > 0
-    n = tri_coords.shape[0]
-    for f in nb.prange(n):
-        tri = tri_coords[f]
-        r2a, r2b, unit = _row_range(min(tri[0, 1], tri[1, 1], tri[2, 1]), max(tri[0, 1], tri[1, 1], tri[2, 1]), unit_bits)
-        r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
-        k = 0 if counting else offsets[f]
-        for r2 in range(r2a, r2b + 1):
-            for r3 in range(r3a, r3b + 1):
-                hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
-                if not hit:
-                    continue
-                if not counting:
-                    j, frac = _cell_of(tri, t, wa, wb, wc, dd, unit_bits)
-                    keys[k] = _pack(r2, r3, j)
-                    fracs[k] = frac
-                    # Projection orientation +1 means the normal points along +d: the row leaves the solid.
-                    signs[k] = -s
-                    faces[k] = f
-                k += 1
-        if counting:
-            counts[f] = k
+    n = triangles.shape[0]
+    n_chunks = min(n, _ROW_HIT_CHUNKS)
+    for chunk in nb.prange(n_chunks):
+        tri = np.empty((3, 3), dtype=np.int64)
+        for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            for k in range(3):
+                for i in range(3):
+                    tri[k, i] = coords[triangles[f, k], i]
+            r2a, r2b, unit = _row_range(min(tri[0, 1], tri[1, 1], tri[2, 1]), max(tri[0, 1], tri[1, 1], tri[2, 1]), unit_bits)
+            r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
+            k = 0 if counting else offsets[f]
+            for r2 in range(r2a, r2b + 1):
+                for r3 in range(r3a, r3b + 1):
+                    hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
+                    if not hit:
+                        continue
+                    if not counting:
+                        j, frac = _cell_of(tri, t, wa, wb, wc, dd, unit_bits)
+                        keys[k] = _pack(r2, r3, j)
+                        fracs[k] = frac
+                        # Projection orientation +1 means the normal points along +d: the row leaves the solid.
+                        signs[k] = -s
+                        faces[k] = f
+                    k += 1
+            if counting:
+                counts[f] = k
 
 
 @dataclass(frozen=True)
@@ -200,12 +210,12 @@ class RowCrossings:
 def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direction: int) -> RowCrossings:
     """All crossings of lattice rows parallel to EDGE_DIRECTIONS[direction] with the snapped surface."""
     T = row_basis(direction)
-    coords = snapped @ T.T
-    tri_coords = np.ascontiguousarray(coords[faces])
+    coords = np.ascontiguousarray(snapped @ T.T, dtype=np.int64)
+    triangles = np.ascontiguousarray(faces, dtype=np.int64)
     bits = snap_bits(frame)
-    counts = np.zeros(tri_coords.shape[0], dtype=np.int64)
+    counts = np.zeros(triangles.shape[0], dtype=np.int64)
     none_i8, none_i32 = np.empty(0, dtype=np.int8), np.empty(0, dtype=np.int32)
-    _row_hits(tri_coords, bits, counts, counts, np.empty(0), none_i8, none_i32, counts)
+    _row_hits(coords, triangles, bits, counts, counts, np.empty(0), none_i8, none_i32, counts)
     offsets = np.zeros(counts.shape[0] + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])
@@ -213,7 +223,7 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     fracs = np.empty(total, dtype=np.float64)
     signs = np.empty(total, dtype=np.int8)
     hit_faces = np.empty(total, dtype=np.int32)
-    _row_hits(tri_coords, bits, offsets, keys, fracs, signs, hit_faces, np.empty(0, dtype=np.int64))
+    _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, np.empty(0, dtype=np.int64))
     order = np.argsort(keys, kind="stable")
     _order_cells(keys, fracs, hit_faces, order)
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces[order])
