@@ -176,3 +176,15 @@ def match_faces(tets: np.ndarray) -> tuple[np.ndarray, int, int]:
             rotations = [other, other[1:] + other[:1], other[2:] + other[:2]]
             same_side += face in rotations
     return neighbour, overloaded, same_side
+
+
+def surface_edges(faces: np.ndarray) -> tuple[int, int, int]:
+    """(edges, vertices used, edges not in exactly two faces of opposite orientation) by a dict."""
+    seen: dict = {}
+    for f in faces:
+        for j in range(3):
+            p, q = int(f[j]), int(f[(j + 1) % 3])
+            count, forward = seen.get((min(p, q), max(p, q)), (0, 0))
+            seen[(min(p, q), max(p, q))] = (count + 1, forward + (p < q))
+    bad = sum(1 for count, forward in seen.values() if count != 2 or forward != 1)
+    return len(seen), len({int(v) for v in np.ravel(faces)}), bad

@@ -267,3 +267,18 @@ def test_mesh_metrics_orient_by_majority_and_count_the_rest_inverted():
     some[:3] = some[:3][:, [1, 0, 2, 3]]
     bad = mesh_metrics(points, some, surface)
     assert bad["inverted"] == 3 and not bad["closed"]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_surface_edge_counts_match_a_dictionary_twin(seed):
+    from paroct.topology import surface_topology
+
+    rng = np.random.default_rng(seed)
+    # Boundaries of random tet sets of a block (closed, sometimes pinched), then torn and doubled faces.
+    keys = np.arange(27)
+    points, tets = leaf_tets(np.stack(np.unravel_index(keys, (3, 3, 3)), 1).astype(np.int64), np.ones(27, dtype=np.int64))
+    tets = tets[rng.random(len(tets)) < 0.6]
+    faces = boundary_faces(tets, match_faces(tets)[0])
+    faces = np.concatenate([faces[rng.random(len(faces)) < 0.9], faces[: 5 * seed]])
+    topo = surface_topology(faces, len(points))
+    assert (topo.n_edges, topo.n_vertices, topo.bad_edges) == naive.surface_edges(faces)

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from .topology import TET_FACES as _FACES
-from .topology import boundary_faces, match_faces, nonmanifold_vertices
+from .topology import match_faces, nonmanifold_vertices
 
 
 @nb.njit(cache=True)
@@ -183,9 +183,34 @@ def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.nd
     band = band_mask(tets, core)
     band_tets = np.ascontiguousarray(tets[band])
     neighbour, _, _ = match_faces(band_tets)
-    faces = boundary_faces(band_tets, neighbour)
-    faces = faces[~core[faces].all(axis=1)]
-    return band, neighbour, np.ascontiguousarray(faces)
+    return band, neighbour, _open_faces(band_tets, neighbour, core)
+
+
+@nb.njit(cache=True)
+def _open_faces(tets, neighbour, core):
+    """Faces (F, 3) without a neighbour that have a non-core vertex, oriented outward
+    (topology.boundary_faces, then the filter, in one pass)."""
+    n = 0
+    for t in range(tets.shape[0]):
+        for k in range(4):
+            if neighbour[t, k] < 0:
+                n += 1
+    faces = np.empty((n, 3), dtype=tets.dtype)
+    n = 0
+    for t in range(tets.shape[0]):
+        for k in range(4):
+            if neighbour[t, k] >= 0:
+                continue
+            a = tets[t, _FACES[k, 0]]
+            b = tets[t, _FACES[k, 1]]
+            c = tets[t, _FACES[k, 2]]
+            if core[a] and core[b] and core[c]:
+                continue
+            faces[n, 0] = a
+            faces[n, 1] = b
+            faces[n, 2] = c
+            n += 1
+    return faces[:n]
 
 
 def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:

@@ -1,7 +1,7 @@
 """Derived topology of tet meshes: face matching, boundary surface, manifoldness, genus.
 
-Pure functions over (tets (M, 4) int) arrays.  Faces are matched with an open-addressing
-hash table on sorted vertex triples, so there is no limit on the vertex count.
+Pure functions over (tets (M, 4) int) arrays.  Faces and edges are matched by bucketing
+them on their smallest vertex (a counting sort), so there is no limit on the vertex count.
 """
 
 from __future__ import annotations
@@ -11,12 +11,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .octant import sorted_unique
-
 #: Face k of a positively oriented tet is opposite vertex k, ordered to face outward.
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
-
-_FIB = np.uint64(0x9E3779B97F4A7C15)
 
 
 @nb.njit(cache=True, inline="always")
@@ -28,36 +24,6 @@ def _sort3(a, b, c):
     if a > b:
         a, b = b, a
     return a, b, c
-
-
-@nb.njit(cache=True, inline="always")
-def _hash3(a, b, c, bits):
-    h = np.uint64(a) * _FIB
-    h = (h ^ np.uint64(b)) * _FIB
-    h = (h ^ np.uint64(c)) * _FIB
-    return np.int64(h >> np.uint64(64 - bits))
-
-
-@nb.njit(cache=True)
-def pair_table(n_expected):
-    """An empty open-addressing table for up to n_expected vertex pairs: (keys a, keys b, bits)."""
-    bits = 4
-    while (np.int64(1) << bits) < 2 * n_expected + 16:
-        bits += 1
-    return np.full(np.int64(1) << bits, -1, dtype=np.int64), np.empty(np.int64(1) << bits, dtype=np.int64), bits
-
-
-@nb.njit(cache=True)
-def pair_slot(table_a, table_b, bits, a, b):
-    """Slot of the pair (a, b), a < b, in a pair_table; -1 - slot of the empty slot where it would go."""
-    mask = (np.int64(1) << bits) - 1
-    s = _hash3(a, b, 0, bits)
-    while True:
-        if table_a[s] == -1:
-            return -1 - s
-        if table_a[s] == a and table_b[s] == b:
-            return s
-        s = (s + 1) & mask
 
 
 @nb.njit(cache=True)
@@ -73,6 +39,8 @@ def match_faces(tets):
     for t in range(m):
         for k in range(4):
             n_vertices = max(n_vertices, tets[t, k] + 1)
+    if n_vertices > (np.int64(1) << 32):
+        raise ValueError("match_faces packs two vertex ids in 64 bits: at most 2**32 vertices")
     # Bucket the face occurrences by their smallest vertex (a counting sort): each bucket holds
     # every face that could match, a few dozen at most, and vertex ids are spatially coherent,
     # so the buckets of nearby tets are near each other in memory.  No hashing, no probing.
@@ -83,8 +51,10 @@ def match_faces(tets):
     for v in range(n_vertices):
         start[v + 1] += start[v]
     fill = start[:-1].copy()
-    # Row per stored face: the two larger vertices and tet * 4 + face of the first tet holding it.
-    table = np.empty((4 * m, 3), dtype=np.int64)
+    # Per stored face: its two larger vertices packed in one key (a bucket is scanned over keys
+    # alone, 8 bytes a face) and tet * 4 + face of the first tet holding it.
+    pairs = np.empty(4 * m, dtype=np.int64)
+    owner = np.empty(4 * m, dtype=np.int64)
     neighbour = np.full((m, 4), -1, dtype=np.int64)
     overloaded = 0
     same_side = 0
@@ -94,19 +64,19 @@ def match_faces(tets):
             v1 = tets[t, TET_FACES[k, 1]]
             v2 = tets[t, TET_FACES[k, 2]]
             a, b, c = _sort3(v0, v1, v2)
+            pair = (np.int64(b) << 32) | np.int64(c)
             found = -1
             for s in range(start[a], fill[a]):
-                if table[s, 0] == b and table[s, 1] == c:
+                if pairs[s] == pair:
                     found = s
                     break
             if found < 0:
                 s = fill[a]
                 fill[a] += 1
-                table[s, 0] = b
-                table[s, 1] = c
-                table[s, 2] = t * 4 + k
+                pairs[s] = pair
+                owner[s] = t * 4 + k
                 continue
-            o = table[found, 2]
+            o = owner[found]
             if o < 0:
                 overloaded += 1
                 continue
@@ -114,7 +84,7 @@ def match_faces(tets):
             ok = o % 4
             if neighbour[ot, ok] != -1:
                 overloaded += 1
-                table[found, 2] = -1
+                owner[found] = -1
                 continue
             neighbour[ot, ok] = t
             neighbour[t, k] = ot
@@ -135,34 +105,45 @@ def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
 
 @nb.njit(cache=True)
 def _surface_edges(faces, n_vertices):
-    """Number of edges of a triangle surface, and of edges not in exactly two faces of opposite orientation."""
+    """Number of edges and of vertices of a triangle surface, and of edges not in exactly two
+    faces of opposite orientation.  Edges are bucketed by their smaller vertex (a counting
+    sort, as in match_faces)."""
     nf = faces.shape[0]
-    ka, kb, bits = pair_table(3 * nf)
-    size = ka.shape[0]
-    count = np.zeros(size, dtype=np.int64)
-    fwd = np.zeros(size, dtype=np.int64)
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            start[min(faces[f, j], faces[f, (j + 1) % 3]) + 1] += 1
+    for v in range(n_vertices):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    other = np.empty(3 * nf, dtype=np.int64)
+    count = np.zeros(3 * nf, dtype=np.int64)
+    forward = np.zeros(3 * nf, dtype=np.int64)
+    used = np.zeros(n_vertices, dtype=np.bool_)
     for f in range(nf):
         for j in range(3):
             p = faces[f, j]
             q = faces[f, (j + 1) % 3]
+            used[p] = True
             a = min(p, q)
             b = max(p, q)
-            s = pair_slot(ka, kb, bits, a, b)
-            if s < 0:
-                s = -1 - s
-                ka[s] = a
-                kb[s] = b
+            s = start[a]
+            while s < fill[a] and other[s] != b:
+                s += 1
+            if s == fill[a]:
+                other[s] = b
+                fill[a] += 1
             count[s] += 1
             if p < q:
-                fwd[s] += 1
+                forward[s] += 1
     n_edges = 0
     bad_edges = 0
-    for s in range(size):
-        if ka[s] != -1:
+    for a in range(n_vertices):
+        for s in range(start[a], fill[a]):
             n_edges += 1
-            if count[s] != 2 or fwd[s] != 1:
+            if count[s] != 2 or forward[s] != 1:
                 bad_edges += 1
-    return n_edges, bad_edges
+    return n_edges, int(used.sum()), bad_edges
 
 
 @nb.njit(cache=True)
@@ -274,9 +255,8 @@ def surface_topology(faces: np.ndarray, n_vertices: int) -> SurfaceTopology:
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     if faces.shape[0] == 0:
         return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
-    n_edges, bad_edges = _surface_edges(faces, n_vertices)
+    n_edges, n_used, bad_edges = _surface_edges(faces, n_vertices)
     bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
-    used = sorted_unique(faces)
     components = _components(faces, n_vertices)
-    euler = used.shape[0] - n_edges + faces.shape[0]
-    return SurfaceTopology(faces.shape[0], used.shape[0], n_edges, bad_edges, bad_vertices, components, euler)
+    euler = n_used - n_edges + faces.shape[0]
+    return SurfaceTopology(faces.shape[0], n_used, n_edges, bad_edges, bad_vertices, components, euler)
