@@ -180,16 +180,30 @@ def test_prism_table_tets_are_valid_for_a_convex_prism():
         assert np.isclose(sum(abs(v) for v in vols), 0.5) and min(abs(v) for v in vols) > 0
 
 
-@pytest.mark.parametrize("ext", [".obj", ".off", ".ply", ".stl"])
+@pytest.mark.parametrize("ext", [".obj", ".off", ".ply", ".stl", "ascii.stl"])
 def test_surface_formats_load_the_same_solid(tmp_path, ext):
     import meshio
 
     ref = load_surface(DATA / "angle_block.stl")
     path = tmp_path / f"part{ext}"
-    meshio.write(path, meshio.Mesh(ref.vertices, [("triangle", ref.faces)]), **({"binary": True} if ext == ".stl" else {}))
+    options = {"binary": ext == ".stl"} if ext.endswith(".stl") else {}
+    meshio.write(path, meshio.Mesh(ref.vertices, [("triangle", ref.faces)]), **options)
     surface = load_surface(path)
     assert surface.volume == pytest.approx(ref.volume, rel=1e-6)
     assert surface.genus == ref.genus and surface.faces.shape == ref.faces.shape
+
+
+def test_binary_stl_reader_matches_meshio():
+    import meshio
+
+    from paroct.surface import read_surface_file, surface_from_arrays
+
+    path = DATA / "bunny.stl"
+    corners, soup = read_surface_file(path)
+    assert soup.shape[0] * 3 == corners.shape[0]  # the fast path: a soup, welded later
+    raw = meshio.read(path)
+    ours, theirs = surface_from_arrays(corners, soup), surface_from_arrays(raw.points, raw.cells[0].data)
+    assert np.array_equal(ours.vertices, theirs.vertices) and np.array_equal(ours.faces, theirs.faces)
 
 
 def test_quads_are_split_into_triangles(tmp_path):

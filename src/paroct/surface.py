@@ -72,6 +72,10 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     ext = path.suffix.lower()
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
+    if ext == ".stl":
+        soup = _read_binary_stl(path)
+        if soup is not None:
+            return soup
     try:
         with warnings.catch_warnings():  # meshio's ASCII STL reader trips numpy overflow warnings
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -91,6 +95,30 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not tris:
         raise ParoctError(f"{path} holds no triangles")
     return np.asarray(raw.points, dtype=np.float64)[:, :3], np.concatenate(tris)
+
+
+#: A binary STL facet: normal, three corners (float32) and an attribute word, 50 bytes.
+_STL_FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+
+
+def _read_binary_stl(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """Triangle soup (3F corners (3F, 3) float64, faces (F, 3) int64) of a binary STL, or None
+    if the file is not one (its size is not 84 + 50 F for the F in its header: ASCII STL).
+
+    Read straight into numpy: meshio's STL reader merges the corners with a row-wise
+    np.unique that took half a second on an 86 k-triangle part; _weld merges them later anyway.
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(84)
+        if len(head) < 84:
+            return None
+        n = int(np.frombuffer(head, dtype="<u4", count=1, offset=80)[0])
+        if size != 84 + 50 * n:
+            return None
+        facets = np.fromfile(fh, dtype=_STL_FACET, count=n)
+    corners = facets["corners"].reshape(-1, 3).astype(np.float64)
+    return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
 
 
 @nb.njit(cache=True)
@@ -135,9 +163,20 @@ def _edge_report(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int]:
 
 
 def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge exactly coincident vertices, drop unused ones and faces with a repeated vertex."""
-    uniq, inverse = np.unique(vertices, axis=0, return_inverse=True)
-    faces = inverse.reshape(-1)[faces]
+    """Merge exactly coincident vertices, drop faces with a repeated vertex.  The merged
+    vertices are sorted by (x, y, z), as np.unique(axis=0) would give them, by a three-key
+    lexsort (np.unique's row sort was 10x slower)."""
+    if vertices.shape[0] == 0:
+        return vertices, faces
+    order = np.lexsort((vertices[:, 2], vertices[:, 1], vertices[:, 0]))
+    ordered = vertices[order]
+    first = np.empty(ordered.shape[0], dtype=bool)
+    first[0] = True
+    np.any(ordered[1:] != ordered[:-1], axis=1, out=first[1:])
+    inverse = np.empty(ordered.shape[0], dtype=np.int64)
+    inverse[order] = np.cumsum(first) - 1
+    uniq = ordered[first]
+    faces = inverse[faces]
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     return uniq, faces[keep]
 
@@ -182,7 +221,9 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(
             f"{label}: face indices span {faces.min()}..{faces.max()} but len(vertices) = {vertices.shape[0]}"
         )
-    if not np.all(np.isfinite(vertices[np.unique(faces)])):
+    used = np.zeros(vertices.shape[0], dtype=bool)
+    used[faces.ravel()] = True
+    if not np.all(np.isfinite(vertices[used])):
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
     vertices, faces = _weld(vertices, faces)
     if faces.shape[0] == 0:
