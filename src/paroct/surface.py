@@ -19,6 +19,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
+from .topology import edge_multiplicities
 
 #: Surface formats read through meshio, by file extension.
 SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply")
@@ -147,19 +148,8 @@ def _face_components(faces, n_vertices):
 
 def _edge_report(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int]:
     """Counts of (boundary edges, edges with more than two faces, edges whose two faces disagree in orientation)."""
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    lo = directed.min(axis=1)
-    hi = directed.max(axis=1)
-    key = lo * n_vertices + hi
-    forward = directed[:, 0] < directed[:, 1]
-    order = np.argsort(key, kind="stable")
-    key, forward = key[order], forward[order]
-    uniq, start, counts = np.unique(key, return_index=True, return_counts=True)
-    fwd_counts = np.add.reduceat(forward.astype(np.int64), start) if len(start) else np.zeros(0, dtype=np.int64)
-    boundary = int(np.sum(counts == 1))
-    nonmanifold = int(np.sum(counts > 2))
-    flipped = int(np.sum((counts == 2) & (fwd_counts != 1)))
-    return boundary, nonmanifold, flipped
+    count, forward, _ = edge_multiplicities(np.ascontiguousarray(faces, dtype=np.int64), n_vertices)
+    return int(np.sum(count == 1)), int(np.sum(count > 2)), int(np.sum((count == 2) & (forward != 1)))
 
 
 def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -104,10 +104,11 @@ def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
 
 
 @nb.njit(cache=True)
-def _surface_edges(faces, n_vertices):
-    """Number of edges and of vertices of a triangle surface, and of edges not in exactly two
-    faces of opposite orientation.  Edges are bucketed by their smaller vertex (a counting
-    sort, as in match_faces)."""
+def edge_multiplicities(faces, n_vertices):
+    """Per distinct edge of triangles (F, 3): how many faces hold it (E,) and how many of
+    them run it from its smaller to its larger vertex (E,); and the number of vertices used.
+    A closed oriented 2-manifold has every edge at (2, 1).  Edges are bucketed by their
+    smaller vertex (a counting sort, as in match_faces)."""
     nf = faces.shape[0]
     start = np.zeros(n_vertices + 1, dtype=np.int64)
     for f in range(nf):
@@ -137,13 +138,12 @@ def _surface_edges(faces, n_vertices):
             if p < q:
                 forward[s] += 1
     n_edges = 0
-    bad_edges = 0
     for a in range(n_vertices):
         for s in range(start[a], fill[a]):
+            count[n_edges] = count[s]
+            forward[n_edges] = forward[s]
             n_edges += 1
-            if count[s] != 2 or forward[s] != 1:
-                bad_edges += 1
-    return n_edges, int(used.sum()), bad_edges
+    return count[:n_edges], forward[:n_edges], int(used.sum())
 
 
 @nb.njit(cache=True)
@@ -255,7 +255,9 @@ def surface_topology(faces: np.ndarray, n_vertices: int) -> SurfaceTopology:
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     if faces.shape[0] == 0:
         return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
-    n_edges, n_used, bad_edges = _surface_edges(faces, n_vertices)
+    count, forward, n_used = edge_multiplicities(faces, n_vertices)
+    n_edges = count.shape[0]
+    bad_edges = int(np.sum((count != 2) | (forward != 1)))
     bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
     components = _components(faces, n_vertices)
     euler = n_used - n_edges + faces.shape[0]
