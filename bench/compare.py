@@ -20,6 +20,12 @@ Peers are set up as a careful user would, for a target long edge ``size`` = diag
 - Gmsh: the STL merged, surfaces classified (40 degrees), a volume from the surface loop,
   MeshSizeMax = ``size``; Delaunay (Algorithm3D 1) and HXT (10).
 - Netgen: STL geometry, maxh = ``size``.
+- CGAL (pygalmesh, Mesh_3 on the polyhedral domain with features): cell circumradius and
+  surface Delaunay ball radius of a regular tet and triangle of edge ``size`` (sqrt(6)/4 and
+  1/sqrt(3) of it), facet distance size / 10, facet angle >= 25, radius-edge ratio <= 2,
+  feature edges <= ``size``; default perturb and exude.  pygalmesh has no wheel: it builds
+  against the system's CGAL and Eigen (apt-get install libcgal-dev libeigen3-dev, then
+  pip install pygalmesh).
 """
 
 from __future__ import annotations
@@ -37,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-MESHERS = ("paroct", "tetgen", "ftetwild", "gmsh-delaunay", "gmsh-hxt", "netgen")
+MESHERS = ("paroct", "tetgen", "ftetwild", "gmsh-delaunay", "gmsh-hxt", "netgen", "cgal")
 
 
 def _regular_tet_volume(edge: float) -> float:
@@ -95,6 +101,14 @@ def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarr
         points = np.array([p.p for p in m.Points()])
         tets = np.array([[v.nr - 1 for v in e.vertices] for e in m.Elements3D()], dtype=np.int64)
         return points, tets
+    if name == "cgal":
+        import pygalmesh
+
+        mesh = pygalmesh.generate_volume_mesh_from_surface_mesh(
+            str(path), min_facet_angle=25.0, max_radius_surface_delaunay_ball=size / np.sqrt(3),
+            max_facet_distance=size / 10, max_circumradius_edge_ratio=2.0, max_cell_circumradius=size * np.sqrt(6) / 4,
+            max_edge_size_at_feature_edges=size, verbose=False, seed=0)
+        return mesh.points, mesh.get_cells_type("tetra")
     raise ValueError(f"unknown mesher {name}")
 
 

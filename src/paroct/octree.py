@@ -302,21 +302,22 @@ def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndar
 
 
 @nb.njit(cache=True)
-def _seed_range_max_level(keys, levels, lo_key, hi_key):
-    """Largest level among sorted seeds with lo_key <= key <= hi_key, or -1."""
+def _seed_deeper_in_range(keys, levels, lo_key, hi_key, level):
+    """True iff a sorted seed with lo_key <= key <= hi_key has a level above ``level``.  Stops
+    at the first one: near the root every range holds most seeds, and a full scan made the
+    descent quadratic in the tree's depth."""
     i = np.searchsorted(keys, lo_key)
-    best = -1
     n = keys.shape[0]
     while i < n and keys[i] <= hi_key:
-        if levels[i] > best:
-            best = levels[i]
+        if levels[i] > level:
+            return True
         i += 1
-    return best
+    return False
 
 
 @nb.njit(cache=True)
 def _has_deeper_seed(key, lev, keys, levels):
-    return _SPLIT if _seed_range_max_level(keys, levels, key, octant_last_key(key, lev)) > lev else _LEAF
+    return _SPLIT if _seed_deeper_in_range(keys, levels, key, octant_last_key(key, lev), lev) else _LEAF
 
 
 def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -390,7 +391,9 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
         current_l = np.concatenate([current_l, seeds_l[-1]])
     all_k = np.concatenate(seeds_k)
     all_l = np.concatenate(seeds_l)
-    order = np.lexsort((all_l, all_k))
+    # complete_from_seeds needs keys sorted, levels in any order among equal keys; the seeds are
+    # a few sorted runs, which a stable (merge) sort takes in near-linear time.
+    order = np.argsort(all_k, kind="stable")
     return complete_from_seeds(all_k[order], all_l[order])
 
 
