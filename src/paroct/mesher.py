@@ -442,16 +442,14 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
 
 def _compact(points, tets):
     """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order."""
-    new_id, n_used = _used_ids(tets, points.shape[0])
-    kept = np.empty((n_used, 3))
-    kept[new_id[new_id >= 0]] = points[new_id >= 0]
-    return kept, _renumber(tets, new_id)
+    new_id = _used_ids(tets, points.shape[0])
+    return np.ascontiguousarray(points[new_id >= 0]), _renumber(tets, new_id)
 
 
 @nb.njit(cache=True)
 def _used_ids(tets, n_points):
-    """New id (n_points,) int32 of each point that a tet uses, in point order, -1 for the others;
-    and the number used."""
+    """New id (n_points,) int32 of each point that a tet uses, numbered in point order; -1 for
+    the others."""
     new_id = np.full(n_points, -1, dtype=np.int32)
     for t in range(tets.shape[0]):
         for i in range(4):
@@ -461,7 +459,7 @@ def _used_ids(tets, n_points):
         if new_id[v] == 0:
             new_id[v] = n
             n += 1
-    return new_id, n
+    return new_id
 
 
 @nb.njit(cache=True, parallel=True)
