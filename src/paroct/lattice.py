@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
 from .frame import CUBE_CORNERS
 from .octant import morton_key
-from numba.extending import overload
 from .transitions import (
     CHAIN_IS_ODD,
     CHAIN_SPLITS,
@@ -216,13 +216,10 @@ def _rehash(table, bits):
     """A hash vertex table with twice the rows, holding the same entries: (table, bits)."""
     new_bits = bits + 1
     grown = np.full((np.int64(1) << new_bits, 2), _EMPTY, dtype=np.int64)
-    mask = (np.int64(1) << new_bits) - 1
     for s in range(table.shape[0]):
         key = table[s, 0]
         if key != _EMPTY:
-            t = _slot(key, new_bits)
-            while grown[t, 0] != _EMPTY:
-                t = (t + 1) & mask
+            t = _probe(grown, key, new_bits)
             grown[t, 0] = key
             grown[t, 1] = table[s, 1]
     return grown, new_bits

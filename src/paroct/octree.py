@@ -303,9 +303,8 @@ def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndar
 
 @nb.njit(cache=True)
 def _seed_deeper_in_range(keys, levels, lo_key, hi_key, level):
-    """True iff a sorted seed with lo_key <= key <= hi_key has a level above ``level``.  Stops
-    at the first one: near the root every range holds most seeds, and a full scan made the
-    descent quadratic in the tree's depth."""
+    """True iff a sorted seed with lo_key <= key <= hi_key has a level above ``level`` (the
+    scan stops at the first one: only whether one exists matters)."""
     i = np.searchsorted(keys, lo_key)
     n = keys.shape[0]
     while i < n and keys[i] <= hi_key:

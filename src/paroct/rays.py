@@ -262,6 +262,22 @@ def winding_numbers(crossings: RowCrossings, points: np.ndarray) -> np.ndarray:
 
 
 @nb.njit(cache=True, inline="always")
+def _point_key(basis, points, i):
+    """Packed key (row, cell) of lattice point i on the rows of the basis's direction: the row
+    (p2, p3) = basis rows 1, 2 applied to it, the cell t = basis row 0."""
+    x, y, z = points[i, 0], points[i, 1], points[i, 2]
+    return _pack(basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * z,
+                 basis[2, 0] * x + basis[2, 1] * y + basis[2, 2] * z,
+                 basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * z)
+
+
+@nb.njit(cache=True, inline="always")
+def _row_start_key(key):
+    """The smallest key of a key's row (its cell field zeroed: cell -_KEY_OFFSET)."""
+    return (key >> _KEY_BITS) << _KEY_BITS
+
+
+@nb.njit(cache=True, inline="always")
 def _lower_bound(keys, key, lo, hi):
     """First index in keys[lo:hi] (sorted) whose key is >= key, or hi."""
     while lo < hi:
@@ -281,11 +297,8 @@ def _winding_numbers(keys, csum, basis, points, out):
     start (rows hold a few crossings), so the second search costs O(log crossings in the row)."""
     n = keys.shape[0]
     for i in nb.prange(points.shape[0]):
-        t = basis[0, 0] * points[i, 0] + basis[0, 1] * points[i, 1] + basis[0, 2] * points[i, 2]
-        r2 = basis[1, 0] * points[i, 0] + basis[1, 1] * points[i, 1] + basis[1, 2] * points[i, 2]
-        r3 = basis[2, 0] * points[i, 0] + basis[2, 1] * points[i, 1] + basis[2, 2] * points[i, 2]
-        start = _lower_bound(keys, _pack(r2, r3, -_KEY_OFFSET), 0, n)
-        key = _pack(r2, r3, t)
+        key = _point_key(basis, points, i)
+        start = _lower_bound(keys, _row_start_key(key), 0, n)
         step = 1
         hi = start
         while hi < n and keys[hi] < key:
@@ -302,10 +315,7 @@ def _edge_cuts(keys, fracs, basis, starts, start_inside, out, status):
     status 1."""
     n = keys.shape[0]
     for e in nb.prange(starts.shape[0]):
-        t = basis[0, 0] * starts[e, 0] + basis[0, 1] * starts[e, 1] + basis[0, 2] * starts[e, 2]
-        r2 = basis[1, 0] * starts[e, 0] + basis[1, 1] * starts[e, 1] + basis[1, 2] * starts[e, 2]
-        r3 = basis[2, 0] * starts[e, 0] + basis[2, 1] * starts[e, 1] + basis[2, 2] * starts[e, 2]
-        key = _pack(r2, r3, t)
+        key = _point_key(basis, starts, e)
         lo = _lower_bound(keys, key, 0, n)
         hi = _lower_bound(keys, key + 1, lo, n)  # keys are integers: key + 1 is cell t + 1
         status[e] = 0
