@@ -143,6 +143,11 @@ def test_bad_output_is_refused_before_meshing(tmp_path, capsys, monkeypatch):
         _assert_one_line_error(*_run(capsys, "mesh", stl, "-o", tmp_path / out), match)
 
 
+def _written(path, data: bytes):
+    path.write_bytes(data)
+    return path
+
+
 def _open_box(tmp_path):
     v, f = _surface_arrays()
     return _write_surface(tmp_path / "open.stl", v, f[1:])
@@ -167,6 +172,8 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", _unknown_extension(t)], "unknown surface format '.xyz'"),
         (lambda t, s: ["mesh", _open_box(t)], r"open surface, \d+ boundary edges"),
         (lambda t, s: ["mesh", _nan_box(t)], "NaN"),
+        (lambda t, s: ["mesh", _written(t / "cut.stl", b"solid x\nfacet normal 0 0 1\n")], "cannot read .* as STL"),
+        (lambda t, s: ["mesh", _written(t / "none.stl", bytes(84))], "empty surface"),
         (lambda t, s: ["mesh", s, "--size", "0"], "size = 0"),
         (lambda t, s: ["mesh", s, "--size", "-1"], "size = -1"),
         (lambda t, s: ["mesh", s, "--size", "nan"], "size = nan"),

@@ -8,6 +8,8 @@ triangles, which are closed and consistently oriented (outward normals, positive
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -73,12 +75,14 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     ext = path.suffix.lower()
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
-    if ext == ".stl":
-        soup = _read_binary_stl(path)
+    try:
+        soup = _read_binary_stl(path) if ext == ".stl" else None
         if soup is not None:
             return soup
-    try:
-        with warnings.catch_warnings():  # meshio's ASCII STL reader trips numpy overflow warnings
+        # meshio's ASCII STL reader trips numpy overflow warnings and prints its own error
+        # line before raising; ours below is the one the user gets.
+        with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()), \
+                contextlib.redirect_stderr(io.StringIO()):
             warnings.simplefilter("ignore", RuntimeWarning)
             raw = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types, even SystemExit, for malformed files
