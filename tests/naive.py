@@ -188,3 +188,74 @@ def surface_edges(faces: np.ndarray) -> tuple[int, int, int]:
             seen[(min(p, q), max(p, q))] = (count + 1, forward + (p < q))
     bad = sum(1 for count, forward in seen.values() if count != 2 or forward != 1)
     return len(seen), len({int(v) for v in np.ravel(faces)}), bad
+
+
+def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
+    """Alive mask (M,) of paroct.repair's worklist repair, by dictionaries.
+
+    A stack of vertices starts with ``bad``.  A vertex's live star splits into pieces joined
+    through faces containing it; the live faces through it without a live partner give link
+    edges p -> q (faces oriented outward, rotated to start at the vertex).  If the link
+    edges do not form one closed cycle, every piece but the largest (ties: the piece of the
+    earliest tet) goes, or the whole star if it is one piece; the vertices of removed tets
+    are pushed (unless already on the stack).
+    """
+    faces_of = [(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)]
+    star: dict = {}
+    holders: dict = {}
+    for t, tet in enumerate(tets.tolist()):
+        for v in tet:
+            star.setdefault(v, []).append(t)
+        for f in faces_of:
+            holders.setdefault(frozenset(tet[i] for i in f), []).append(t)
+    alive = np.ones(len(tets), dtype=bool)
+    work = [int(v) for v in bad]
+    queued = set(work)
+    while work:
+        v = work.pop()
+        queued.discard(v)
+        live = [t for t in star.get(v, []) if alive[t]]
+        piece = {t: t for t in live}
+
+        def root(t):
+            while piece[t] != t:
+                t = piece[t]
+            return t
+
+        link = []
+        for t in live:
+            tet = tets[t].tolist()
+            for f in faces_of:
+                face = [tet[i] for i in f]
+                if v not in face:
+                    continue
+                partners = [o for o in holders[frozenset(face)] if o != t and alive[o]]
+                if partners:
+                    a, b = root(t), root(partners[0])
+                    piece[max(a, b)] = min(a, b)
+                    continue
+                i = face.index(v)
+                link.append((face[(i + 1) % 3], face[(i + 2) % 3]))
+        if not link:
+            continue
+        nxt = dict(link)
+        if len(nxt) == len(link):
+            cur, steps = link[0][0], 0
+            while cur in nxt and steps <= len(link):
+                cur, steps = nxt[cur], steps + 1
+                if cur == link[0][0]:
+                    break
+            if steps == len(link) and cur == link[0][0]:
+                continue
+        roots = [root(t) for t in live]
+        sizes = {r: roots.count(r) for r in roots}
+        keep = min((r for r in sizes if sizes[r] == max(sizes.values())), key=lambda r: live.index(r))
+        for t, r in zip(live, roots):
+            if len(sizes) == 1 or r != keep:
+                if alive[t]:
+                    alive[t] = False
+                    for w in tets[t].tolist():
+                        if w not in queued:
+                            work.append(w)
+                            queued.add(w)
+    return alive

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from .topology import TET_FACES as _FACES
-from .topology import match_faces, nonmanifold_vertices
+from .topology import _sort3, match_faces, nonmanifold_vertices
 
 
 @nb.njit(cache=True)
@@ -38,9 +38,32 @@ def _vertex_tets(tets, n_vertices):
 
 
 @nb.njit(cache=True)
-def _repair_star(v, tets, neighbour, alive, offsets, ids, remove_out):
+def _star_partner(tets, star, n, i, v, off):
+    """Index j != i in star[:n] of the tet sharing with tet star[i] its face through v
+    (the face opposite its vertex off), or -1: a face through v has both its tets in v's star."""
+    t = star[i]
+    for j in range(n):
+        if j == i:
+            continue
+        o = star[j]
+        shared = 0
+        for a in range(4):
+            w = tets[t, a]
+            if w == v or w == off:
+                continue
+            for b in range(4):
+                if tets[o, b] == w:
+                    shared += 1
+        if shared == 2:
+            return j
+    return -1
+
+
+@nb.njit(cache=True)
+def _repair_star(v, tets, alive, offsets, ids, remove_out):
     """Check vertex v; if its live boundary is not one fan, mark tets to remove in remove_out
-    (the star's pieces but the largest; the whole star if it is one piece).  Returns the count."""
+    (the star's pieces but the largest; the whole star if it is one piece).  Face neighbours
+    come from the live star itself.  Returns the count."""
     lo = offsets[v]
     hi = offsets[v + 1]
     star = np.empty(hi - lo, dtype=np.int64)
@@ -61,15 +84,14 @@ def _repair_star(v, tets, neighbour, alive, offsets, ids, remove_out):
         for k in range(4):
             if tets[t, k] == v:
                 continue
-            o = neighbour[t, k]
-            if o >= 0 and alive[o]:
-                for j in range(n):
-                    if star[j] == o and label[j] != label[i]:
-                        old = max(label[i], label[j])
-                        new = min(label[i], label[j])
-                        for r in range(n):
-                            if label[r] == old:
-                                label[r] = new
+            j = _star_partner(tets, star, n, i, v, tets[t, k])
+            if j >= 0:
+                if label[j] != label[i]:
+                    old = max(label[i], label[j])
+                    new = min(label[i], label[j])
+                    for r in range(n):
+                        if label[r] == old:
+                            label[r] = new
                 continue
             # Face k (opposite vertex k) is on the boundary; orient it outward, rotate v first.
             f0 = tets[t, _FACES[k, 0]]
@@ -123,7 +145,7 @@ def _repair_star(v, tets, neighbour, alive, offsets, ids, remove_out):
 
 
 @nb.njit(cache=True)
-def _repair(tets, neighbour, bad_vertices, n_vertices, complete):
+def _repair(tets, bad_vertices, n_vertices, complete):
     """Worklist repair: check the bad vertices, remove tets, re-check the vertices they had.
 
     complete: (V,) True where the vertex's whole star is among tets.  Returns (alive (M,) mask,
@@ -145,7 +167,7 @@ def _repair(tets, neighbour, bad_vertices, n_vertices, complete):
         queued[v] = False
         if not complete[v]:
             return alive, False
-        count = _repair_star(v, tets, neighbour, alive, offsets, ids, buf)
+        count = _repair_star(v, tets, alive, offsets, ids, buf)
         for i in range(count):
             t = buf[i]
             if not alive[t]:
@@ -217,32 +239,99 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int,
     """Tets (M', 4) whose boundary is a closed 2-manifold, the number of tets removed, and
     the boundary faces (F, 3) of the result.
 
-    The band check finds the bad vertices cheaply; only if there are any is the full face
-    adjacency built for the local worklist repair.  core: see band_boundary; vertices of
-    removed tets leave it.
+    The band check finds the bad vertices cheaply; only if there are any is the repair run
+    (local_repair) and the boundary updated around the removed tets.  core: see
+    band_boundary; vertices of removed tets leave it.
     """
     _, _, faces = band_boundary(tets, core)
     bad = np.nonzero(nonmanifold_vertices(faces, core.shape[0]))[0]
     if bad.size == 0:
         return tets, 0, faces
     tets = np.ascontiguousarray(tets)
-    # Work on the band and one ring of tets around it: the stars of all band vertices.
-    band = band_mask(tets, core)
-    band_vertex = np.zeros(core.shape[0], dtype=bool)
-    band_vertex[tets[band].ravel()] = True
-    local = band_vertex[tets].any(axis=1)
-    sub = np.ascontiguousarray(tets[local])
-    neighbour, _, _ = match_faces(sub)
-    sub_alive, ok = _repair(sub, neighbour, bad, core.shape[0], band_vertex)
-    if ok:
-        alive = np.ones(tets.shape[0], dtype=bool)
-        alive[np.nonzero(local)[0][~sub_alive]] = False
-    else:  # the repair spread beyond the band: redo it on the whole mesh
-        neighbour, _, _ = match_faces(tets)
-        alive, _ = _repair(tets, neighbour, bad, core.shape[0], np.ones(core.shape[0], dtype=bool))
-    core[tets[~alive].ravel()] = False
+    alive = local_repair(tets, core, bad)
+    removed = np.nonzero(~alive)[0]
+    lost = np.zeros(core.shape[0], dtype=bool)
+    lost[tets[removed].ravel()] = True
+    core &= ~lost
+    around = np.nonzero(touching(tets, lost))[0]  # every face neighbour of a removed tet
+    faces = _faces_after_removal(faces, tets[around], alive[around])
     tets = tets[alive]
-    _, _, faces = band_boundary(tets, core)
     if nonmanifold_vertices(faces, core.shape[0]).any():
         raise AssertionError("pinch repair left a non-manifold boundary vertex")
-    return tets, int((~alive).sum()), faces
+    return tets, int(removed.size), faces
+
+
+def local_repair(tets: np.ndarray, core: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Mask (M,) of the tets kept by the worklist repair (_repair) started at the bad vertices.
+
+    The repair of a vertex reads only its star, so it runs on the tets around the band's
+    vertices (band_vertices), whose stars are all there; only if the worklist leaves them does
+    it run on the whole mesh.  Relative tet order is kept, so both give the same result.
+    """
+    band_vertex = band_vertices(tets, core)
+    sub_ids = np.nonzero(touching(tets, band_vertex))[0]
+    sub_alive, ok = _repair(tets[sub_ids], bad, core.shape[0], band_vertex)
+    if not ok:
+        alive, _ = _repair(tets, bad, core.shape[0], np.ones(core.shape[0], dtype=bool))
+        return alive
+    alive = np.ones(tets.shape[0], dtype=bool)
+    alive[sub_ids[~sub_alive]] = False
+    return alive
+
+
+@nb.njit(cache=True)
+def band_vertices(tets, core):
+    """Mask (V,) of the vertices of tets with a non-core vertex (the band)."""
+    out = np.zeros(core.shape[0], dtype=np.bool_)
+    for t in range(tets.shape[0]):
+        if not (core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]]):
+            for i in range(4):
+                out[tets[t, i]] = True
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def touching(tets, marked):
+    """Mask (M,) of the tets with a marked vertex (marked[tets].any(axis=1) without its (M, 4)
+    temporary)."""
+    out = np.empty(tets.shape[0], dtype=np.bool_)
+    for t in nb.prange(tets.shape[0]):
+        out[t] = marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]
+    return out
+
+
+def _faces_after_removal(faces: np.ndarray, near: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """The boundary faces once the dead tets are gone: the old boundary faces (F, 3) except
+    the dead tets' own, and the faces of dead tets whose live neighbour they expose, turned to
+    face out of it.  near (S, 4): the tets with a vertex of a dead tet (so every face
+    neighbour of a dead tet), alive (S,) their mask."""
+    neighbour, _, _ = match_faces(near)
+    dead = np.nonzero(~alive)[0]
+    dead_faces = near[dead[:, None, None], _FACES[None, :, :]].reshape(-1, 3)  # face k of each dead tet
+    across = neighbour[dead].ravel()
+    gone = np.sort(dead_faces[across < 0], axis=1)
+    gone = np.ascontiguousarray(gone[np.lexsort(gone.T[::-1])])
+    exposed = (across >= 0) & alive[np.maximum(across, 0)]
+    return np.concatenate([faces[_faces_not_in(faces, gone)], dead_faces[exposed][:, ::-1]])
+
+
+@nb.njit(cache=True)
+def _faces_not_in(faces, sorted_triples):
+    """Mask (F,) of the faces whose vertex set is not a row of sorted_triples (rows ascending,
+    sorted lexicographically)."""
+    kept = np.ones(faces.shape[0], dtype=np.bool_)
+    n = sorted_triples.shape[0]
+    for f in range(faces.shape[0]):
+        a, b, c = _sort3(faces[f, 0], faces[f, 1], faces[f, 2])
+        lo = 0
+        hi = n
+        while lo < hi:
+            mid = (lo + hi) // 2
+            x, y, z = sorted_triples[mid, 0], sorted_triples[mid, 1], sorted_triples[mid, 2]
+            if x < a or (x == a and (y < b or (y == b and z < c))):
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo < n and sorted_triples[lo, 0] == a and sorted_triples[lo, 1] == b and sorted_triples[lo, 2] == c:
+            kept[f] = False
+    return kept
