@@ -18,20 +18,25 @@ TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.
 
 
 @nb.njit(cache=True, inline="always")
-def _dihedral_cosine(nk0, nk1, nk2, lk, nm0, nm1, nm2, lm):
-    """Cosine of the dihedral angle between the faces with outward normals nk, nm (lengths lk,
-    lm), clamped to [-1, 1]; 1 (angle 0) for a degenerate face."""
-    if lk == 0.0 or lm == 0.0:
+def _cosine(nkx, nky, nkz, ik, nmx, nmy, nmz, im):
+    """Cosine of the dihedral angle between the faces with outward normals nk, nm (inverse
+    lengths ik, im), clamped to [-1, 1]; 1 (angle 0) for a degenerate face (inverse length 0)."""
+    if ik == 0.0 or im == 0.0:
         return 1.0
-    c = -(nk0 * nm0 + nk1 * nm1 + nk2 * nm2) / (lk * lm)
+    c = -(nkx * nmx + nky * nmy + nkz * nmz) * ik * im
     return min(1.0, max(-1.0, c))
 
 
 @nb.njit(cache=True, inline="always")
-def _measure_tet(points, tets, t, cosines):
-    """Signed volume and 3r/R of tet t, and the cosines of its six dihedral angles (written to
-    cosines[0:6], TET_EDGES order).  The cosine falls as the angle grows, so extremes are
-    reduced over cosines and only they go through acos."""
+def _inverse(x):
+    return 1.0 / x if x > 0.0 else 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def _measure_tet(points, tets, t):
+    """(signed volume, 3r/R, and the cosines of the six dihedral angles in TET_EDGES order) of
+    tet t.  The cosine falls as the angle grows, so extremes are reduced over cosines and only
+    they go through acos."""
     a = tets[t, 0]
     b = tets[t, 1]
     c = tets[t, 2]
@@ -52,31 +57,35 @@ def _measure_tet(points, tets, t, cosines):
     l1 = math.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
     l2 = math.sqrt(n2x * n2x + n2y * n2y + n2z * n2z)
     l3 = math.sqrt(n3x * n3x + n3y * n3y + n3z * n3z)
+    i0, i1, i2, i3 = _inverse(l0), _inverse(l1), _inverse(l2), _inverse(l3)
     # Edge (i, j) lies between the faces opposite the other two vertices.
-    cosines[0] = _dihedral_cosine(n2x, n2y, n2z, l2, n3x, n3y, n3z, l3)  # 01
-    cosines[1] = _dihedral_cosine(n1x, n1y, n1z, l1, n3x, n3y, n3z, l3)  # 02
-    cosines[2] = _dihedral_cosine(n1x, n1y, n1z, l1, n2x, n2y, n2z, l2)  # 03
-    cosines[3] = _dihedral_cosine(n0x, n0y, n0z, l0, n3x, n3y, n3z, l3)  # 12
-    cosines[4] = _dihedral_cosine(n0x, n0y, n0z, l0, n2x, n2y, n2z, l2)  # 13
-    cosines[5] = _dihedral_cosine(n0x, n0y, n0z, l0, n1x, n1y, n1z, l1)  # 23
+    c01 = _cosine(n2x, n2y, n2z, i2, n3x, n3y, n3z, i3)
+    c02 = _cosine(n1x, n1y, n1z, i1, n3x, n3y, n3z, i3)
+    c03 = _cosine(n1x, n1y, n1z, i1, n2x, n2y, n2z, i2)
+    c12 = _cosine(n0x, n0y, n0z, i0, n3x, n3y, n3z, i3)
+    c13 = _cosine(n0x, n0y, n0z, i0, n2x, n2y, n2z, i2)
+    c23 = _cosine(n0x, n0y, n0z, i0, n1x, n1y, n1z, i1)
     area = 0.5 * (l0 + l1 + l2 + l3)
-    # Opposite edge pairs (01, 23), (02, 13), (03, 12).
-    l01 = math.sqrt(bx * bx + by * by + bz * bz)
-    l02 = math.sqrt(cx * cx + cy * cy + cz * cz)
-    l03 = math.sqrt(dx * dx + dy * dy + dz * dz)
-    l12 = math.sqrt(ex * ex + ey * ey + ez * ez)
-    l13 = math.sqrt(fx * fx + fy * fy + fz * fz)
+    # Products of the lengths of opposite edge pairs (01, 23), (02, 13), (03, 12).
     gx, gy, gz = dx - cx, dy - cy, dz - cz
-    l23 = math.sqrt(gx * gx + gy * gy + gz * gz)
-    p = l01 * l23
-    q = l02 * l13
-    r = l03 * l12
+    p = math.sqrt((bx * bx + by * by + bz * bz) * (gx * gx + gy * gy + gz * gz))
+    q = math.sqrt((cx * cx + cy * cy + cz * cz) * (fx * fx + fy * fy + fz * fz))
+    r = math.sqrt((dx * dx + dy * dy + dz * dz) * (ex * ex + ey * ey + ez * ez))
     prod = (p + q + r) * (p + q - r) * (p - q + r) * (-p + q + r)
     if vol <= 0.0 or prod <= 0.0 or area == 0.0:
         ratio = 0.0
-    else:
-        ratio = 3.0 * (3.0 * vol / area) / (math.sqrt(prod) / (24.0 * vol))
-    return vol, ratio
+    else:  # 3 r / R with r = 3 V / area, R = sqrt(prod) / (24 V)
+        ratio = 216.0 * vol * vol / (area * math.sqrt(prod))
+    return vol, ratio, c01, c02, c03, c12, c13, c23
+
+
+@nb.njit(cache=True, inline="always")
+def _extreme_cosines(vol, c01, c02, c03, c12, c13, c23):
+    """(largest, smallest) dihedral cosine: the smallest and largest angle; (1, -1), angles 0
+    and 180, for a tet of non-positive volume."""
+    if vol <= 0.0:
+        return 1.0, -1.0
+    return max(c01, c02, c03, c12, c13, c23), min(c01, c02, c03, c12, c13, c23)
 
 
 @nb.njit(cache=True, inline="always")
@@ -87,16 +96,12 @@ def _degrees(cosine):
 @nb.njit(cache=True, parallel=True)
 def _tet_quality(points, tets, volume, radius_ratio, min_dihedral, max_dihedral):
     for t in nb.prange(tets.shape[0]):
-        cosines = np.empty(6)
-        vol, ratio = _measure_tet(points, tets, t, cosines)
+        vol, ratio, c01, c02, c03, c12, c13, c23 = _measure_tet(points, tets, t)
+        c_hi, c_lo = _extreme_cosines(vol, c01, c02, c03, c12, c13, c23)
         volume[t] = vol
         radius_ratio[t] = ratio
-        if vol <= 0.0:
-            min_dihedral[t] = 0.0
-            max_dihedral[t] = 180.0
-        else:
-            min_dihedral[t] = _degrees(cosines.max())
-            max_dihedral[t] = _degrees(cosines.min())
+        min_dihedral[t] = _degrees(c_hi)
+        max_dihedral[t] = _degrees(c_lo)
 
 
 @dataclass(frozen=True)
@@ -128,9 +133,9 @@ def tet_dihedral_angles(points, tets):
     """All six dihedral angles (M, 6) float64 in degrees, edge order TET_EDGES."""
     out = np.empty((tets.shape[0], 6))
     for t in range(tets.shape[0]):
-        _measure_tet(points, tets, t, out[t])
+        cosines = _measure_tet(points, tets, t)[2:]
         for i in range(6):
-            out[t, i] = _degrees(out[t, i])
+            out[t, i] = _degrees(cosines[i])
     return out
 
 
@@ -145,17 +150,14 @@ def _summarize(points, tets, core, fat_ratio, partial, fat_count):
     m = tets.shape[0]
     n_chunks = partial.shape[0]
     for c in nb.prange(n_chunks):
-        cosines = np.empty(6)
         lo = m * c // n_chunks
         hi = m * (c + 1) // n_chunks
         # Extremes as cosines: the smallest angle has the largest cosine.
         cmax, cmin, rmin, vsum, icmax, icmin = -1.0, 1.0, np.inf, 0.0, -1.0, 1.0
         fat = 0
         for t in range(lo, hi):
-            vol, ratio = _measure_tet(points, tets, t, cosines)
-            c_hi, c_lo = cosines.max(), cosines.min()
-            if vol <= 0.0:
-                c_hi, c_lo = 1.0, -1.0
+            vol, ratio, c01, c02, c03, c12, c13, c23 = _measure_tet(points, tets, t)
+            c_hi, c_lo = _extreme_cosines(vol, c01, c02, c03, c12, c13, c23)
             cmax = max(cmax, c_hi)
             cmin = min(cmin, c_lo)
             rmin = min(rmin, ratio)
