@@ -263,3 +263,26 @@ def test_refinement_stops_where_memory_ends_and_says_so():
     rep = result.report
     assert rep.size == pytest.approx(0.1) and not rep.notes
     assert len(rep.warnings) == 1 and "would not fit in memory" in rep.warnings[0] and "thinnest wall" in rep.warnings[0]
+
+
+@pytest.mark.parametrize("name,max_factor", [("bunny", 8), ("xyz_cube", 1), ("angle_block", 4)])
+def test_vertex_classes_from_leaves_equal_winding_numbers(name, max_factor):
+    from paroct.lattice import number_vertices
+    from paroct.mesher import MeshReport, graded_leaves, vertex_classes
+    from paroct.sizing import size_field
+
+    surface = load_surface(DATA / f"{name}.stl")
+    h = surface.diagonal / 50
+    field = size_field(h, max_factor * h)
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = surface.faces.astype(np.int64)
+    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+    report = MeshReport(size=h, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
+                        input_genus=surface.genus, input_components=surface.components)
+    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
+    vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)),
+                               prefix=band.coords)
+    inside = vertex_classes(vertices, band.inside)
+    assert inside.any() and not inside.all()
+    assert np.array_equal(inside, rays.winding_numbers(crossings[X_AXIS_DIRECTION], vertices.coords) > 0)

@@ -272,9 +272,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
                                prefix=band.coords)
     coords = vertices.coords
     n_band = band.coords.shape[0]
-    inside = np.empty(coords.shape[0], dtype=bool)
-    inside[:n_band] = band.inside
-    inside[n_band:] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords[n_band:]) > 0
+    inside = vertex_classes(vertices, band.inside)
     stages.done("classify")
 
     tets = graded_tets(vertices, inside)  # tets with no inside vertex stay outside
@@ -409,6 +407,39 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     keep = in_band.copy()
     keep[~in_band] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~in_band], frame)) > 0
     return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
+
+
+def vertex_classes(vertices: LeafVertices, band_inside: np.ndarray) -> np.ndarray:
+    """Class (V,) bool of every vertex of graded_leaves' leaves, numbered with the band's
+    vertices (band_inside (P,)) first: no winding numbers needed.
+
+    Every other vertex belongs to a leaf that is not a cut cell, so all finest lattice points
+    in the leaf's closure share one class (graded_leaves): the class of a band vertex among its
+    corners (a band cell around a warped vertex has that vertex), else inside (a leaf with no
+    band corner is kept only when its anchor is inside).
+    """
+    inside = np.empty(vertices.coords.shape[0], dtype=bool)
+    inside[: band_inside.shape[0]] = band_inside
+    _spread_leaf_classes(vertices.corner_ids, vertices.split_row, vertices.split_ids, inside, band_inside.shape[0])
+    return inside
+
+
+@nb.njit(cache=True)
+def _spread_leaf_classes(corner_ids, split_row, split_ids, inside, n_band):
+    for i in range(corner_ids.shape[0]):
+        leaf_inside = True
+        for c in range(8):
+            if corner_ids[i, c] < n_band:
+                leaf_inside = inside[corner_ids[i, c]]
+                break
+        for c in range(8):
+            if corner_ids[i, c] >= n_band:
+                inside[corner_ids[i, c]] = leaf_inside
+        r = split_row[i]
+        if r >= 0:
+            for p in range(split_ids.shape[1]):
+                if split_ids[r, p] >= n_band:
+                    inside[split_ids[r, p]] = leaf_inside
 
 
 def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices, np.ndarray]:
