@@ -7,6 +7,8 @@ from paroct import octant
 from paroct.octree import (
     balance,
     complete_from_seeds,
+    octants_holding,
+    octants_within,
     tree_is_balanced,
     tree_is_complete,
     tree_is_linear,
@@ -99,3 +101,35 @@ def test_tree_is_balanced_detects_a_corner_violation():
     assert not tree_is_balanced(keys, levels) and not naive_is_balanced(keys, levels)
     bk, bl = balance(seed, np.array([4], dtype=np.int8))
     assert tree_is_balanced(bk, bl) and naive_is_balanced(bk, bl)
+
+
+def _last(key, level):
+    return int(key) | ((1 << (3 * (ML - int(level)))) - 1)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_octants_holding_matches_a_scan(seed):
+    rng = np.random.default_rng(seed)
+    level = int(rng.integers(1, 4))
+    side = 1 << (ML - level)
+    coords = np.unique(rng.integers(0, 1 << level, size=(40, 3)), axis=0) * side
+    keys = np.sort(octant.morton_keys(coords))
+    cell_side = 1 << (ML - 6)
+    cells = octant.morton_keys(rng.integers(0, 1 << 6, size=(int(rng.integers(0, 60)), 3)) * cell_side)
+    cells = np.unique(np.concatenate([cells, keys[::3], keys[1::4] + 1]))  # cells at octant anchors too
+    got = octants_holding(keys, level, cells)
+    want = [any(int(k) <= int(c) <= _last(k, level) for c in cells) for k in keys]
+    assert got.tolist() == want
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_octants_within_matches_a_scan(seed):
+    rng = np.random.default_rng(seed)
+    outer_keys, outer_levels = complete_from_seeds(*_random_seeds(rng, 6, 4))
+    pick = rng.random(len(outer_keys)) < 0.5  # disjoint, with gaps
+    outer_keys, outer_levels = outer_keys[pick], outer_levels[pick]
+    keys, levels = _random_seeds(rng, 80, 5)
+    got = octants_within(keys, levels, outer_keys, outer_levels)
+    want = [any(lo <= lv and int(ko) <= int(k) and _last(k, lv) <= _last(ko, lo) for ko, lo in zip(outer_keys, outer_levels))
+            for k, lv in zip(keys, levels)]
+    assert got.tolist() == want and any(want) and not all(want)

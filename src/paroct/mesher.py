@@ -20,10 +20,10 @@ from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .octant import MAX_LEVEL, morton_keys, sorted_unique
-from .octree import balance, octant_lattice_anchors, surface_cells
+from .octree import balance, octant_lattice_anchors, octants_holding, octants_within, surface_cells
 from .quality import summarize
 from .repair import remove_pinches
-from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
+from .sizing import OUTSIDE, UNDECIDED, WHOLLY_INSIDE, Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
@@ -385,16 +385,18 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     around = (warped[:, None, :] - CUBE_CORNERS[None, :, :]).reshape(-1, 3)  # the 8 cells at each warped vertex
     around = around[(around >= 0).all(axis=1)]
     band = sorted_unique(np.concatenate([cut_keys, morton_keys(around << (MAX_LEVEL - finest))]))
-    def not_outside(octants: np.ndarray, level: int) -> np.ndarray:
-        """Octants that meet the surface or whose anchor is inside (so not wholly outside)."""
-        last = octants + (np.int64(1) << (3 * (MAX_LEVEL - level))) - 1
-        meets = np.searchsorted(met, last, side="right") > np.searchsorted(met, octants)
-        keep = meets.copy()
-        keep[~meets] = rays.winding_numbers(x_crossings, octant_lattice_anchors(octants[~meets], frame)) > 0
-        return keep
 
-    seed_keys, seed_levels = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
-                                        prune=not_outside)
+    def classify(octants: np.ndarray, level: int) -> np.ndarray:
+        """size_seeds prune: an octant that holds no surface cell has one class throughout,
+        its anchor's; one that holds a surface cell stays undecided."""
+        found = np.full(octants.shape[0], UNDECIDED, dtype=np.int8)
+        free = np.nonzero(~octants_holding(octants, level, met))[0]
+        inside = rays.winding_numbers(x_crossings, octant_lattice_anchors(octants[free], frame)) > 0
+        found[free] = np.where(inside, WHOLLY_INSIDE, OUTSIDE)
+        return found
+
+    seed_keys, seed_levels, seed_inside = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h,
+                                                     field, prune=classify)
     if np.all(seed_levels == finest):  # a uniform lattice: already balanced, nothing to complete
         keys = sorted_unique(np.concatenate([band, seed_keys]))
         levels = np.full(keys.shape[0], finest, dtype=np.int8)
@@ -404,8 +406,11 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
     in_band[fine] = np.isin(keys[fine], band, assume_unique=True)
-    keep = in_band.copy()
-    keep[~in_band] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[~in_band], frame)) > 0
+    # Leaves in a wholly inside seed are inside (balance only splits seeds); the rest are asked.
+    order = np.argsort(seed_keys[seed_inside], kind="stable")
+    keep = in_band | octants_within(keys, levels, seed_keys[seed_inside][order], seed_levels[seed_inside][order])
+    ask = np.nonzero(~keep)[0]
+    keep[ask] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[ask], frame)) > 0
     return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
 
 

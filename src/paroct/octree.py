@@ -290,6 +290,34 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
 
 
+@nb.njit(cache=True)
+def octants_holding(keys, level, cells):
+    """Mask (N,) of the octants that hold a cell: keys (N,) sorted octants of one ``level``
+    (so disjoint), cells (C,) sorted keys of finer octants.  One merge pass, O(N + C)."""
+    out = np.zeros(keys.shape[0], dtype=np.bool_)
+    j = 0
+    for i in range(keys.shape[0]):
+        while j < cells.shape[0] and cells[j] < keys[i]:
+            j += 1
+        out[i] = j < cells.shape[0] and cells[j] <= octant_last_key(keys[i], level)
+    return out
+
+
+@nb.njit(cache=True)
+def octants_within(keys, levels, outer_keys, outer_levels):
+    """Mask (N,) of the octants equal to or inside one of the outer octants.  keys, levels:
+    sorted by key; outer_keys, outer_levels: sorted by key and pairwise disjoint, so only the
+    last outer octant anchored at or before an octant can hold it.  One merge pass."""
+    out = np.zeros(keys.shape[0], dtype=np.bool_)
+    j = 0
+    for i in range(keys.shape[0]):
+        while j < outer_keys.shape[0] and outer_keys[j] <= keys[i]:
+            j += 1
+        if j > 0 and outer_levels[j - 1] <= levels[i]:
+            out[i] = octant_last_key(keys[i], levels[i]) <= octant_last_key(outer_keys[j - 1], outer_levels[j - 1])
+    return out
+
+
 def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndarray:
     """All descendants at ``level_to`` of sorted octants at ``level_from``, sorted."""
     depth = level_to - level_from

@@ -132,26 +132,36 @@ def _required_size(field: SizeField, keys: np.ndarray, level: int, frame: FatFra
 
 #: size_seeds starts this many levels above max_size, so that pruning can skip whole regions.
 PRUNE_DEPTH = 3
+#: Classes a size_seeds prune gives an octant.
+OUTSIDE, UNDECIDED, WHOLLY_INSIDE = 0, 1, 2
 
 
 def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field: SizeField,
-               prune: Callable[[np.ndarray, int], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Seed octants (keys (N,) int64, levels (N,) int8) covering the box: the coarsest octants
-    no larger than max_size whose long edge is at most the size asked for in them (never
-    below the finest level).  Sizes smaller than ``size`` are clamped to it.
+               prune: Callable[[np.ndarray, int], np.ndarray] | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Seed octants (keys (N,) int64, levels (N,) int8, wholly_inside (N,) bool) covering the
+    box: the coarsest octants no larger than max_size whose long edge is at most the size asked
+    for in them (never below the finest level).  Sizes smaller than ``size`` are clamped to it.
 
-    prune(keys, level) -> (N,) bool keeps the octants that need seeds (say, those not wholly
-    outside the solid); the others are dropped with all their descendants, which lets the
-    descent start PRUNE_DEPTH levels above max_size and skip empty regions whole.
+    prune(keys, level) -> (N,) int8 class of each octant: OUTSIDE (dropped with all its
+    descendants, which lets the descent start PRUNE_DEPTH levels above max_size and skip empty
+    regions whole), WHOLLY_INSIDE (so are its descendants: they are not asked again) or
+    UNDECIDED.  wholly_inside flags the seeds found WHOLLY_INSIDE.
     """
     finest = frame.levels
     coarse = max(0, finest - field.coarse_depth)
     level = max(0, coarse - PRUNE_DEPTH) if prune is not None else coarse
     keys, _ = uniform_leaves(frame, box_min, box_max, level)
-    out_keys, out_levels = [], []
+    inside = np.zeros(keys.shape[0], dtype=bool)
+    out_keys, out_levels, out_inside = [], [], []
     while keys.shape[0]:
         if prune is not None:
-            keys = keys[prune(keys, level)]
+            ask = np.nonzero(~inside)[0]
+            found = prune(keys[ask], level)
+            keep = np.ones(keys.shape[0], dtype=bool)
+            keep[ask] = found != OUTSIDE
+            inside[ask] = found == WHOLLY_INSIDE
+            keys, inside = keys[keep], inside[keep]
         if level == finest:
             break
         if level < coarse:
@@ -162,8 +172,11 @@ def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field:
             split = _required_size(field, keys, level, frame) < frame.h * 2.0 ** (finest - level)
         out_keys.append(keys[~split])
         out_levels.append(np.full(int((~split).sum()), level, dtype=np.int8))
+        out_inside.append(inside[~split])
         keys = refine_to_level(keys[split], level, level + 1)
+        inside = np.repeat(inside[split], 8)  # refine_to_level lists each octant's 8 children together
         level += 1
     out_keys.append(keys)
     out_levels.append(np.full(keys.shape[0], level, dtype=np.int8))
-    return np.concatenate(out_keys), np.concatenate(out_levels)
+    out_inside.append(inside)
+    return np.concatenate(out_keys), np.concatenate(out_levels), np.concatenate(out_inside)
