@@ -304,6 +304,23 @@ class LeafVertices:
     coords: np.ndarray
 
 
+@nb.njit(cache=True)
+def _bounding_box(anchors, sides, prefix):
+    """(lo (3,), hi (3,)) over the leaves' closures and the prefix points, in one pass (numpy's
+    axis-0 min and max over (N, 3) cost 10x more)."""
+    lo = anchors[0].copy()
+    hi = anchors[0] + sides[0]
+    for i in range(anchors.shape[0]):
+        for k in range(3):
+            lo[k] = min(lo[k], anchors[i, k])
+            hi[k] = max(hi[k], anchors[i, k] + sides[i])
+    for i in range(prefix.shape[0]):
+        for k in range(3):
+            lo[k] = min(lo[k], prefix[i, k])
+            hi[k] = max(hi[k], prefix[i, k])
+    return lo, hi
+
+
 def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray | None = None) -> LeafVertices:
     """Global vertex ids of leaf corners and of the transition points of coarse leaves.
 
@@ -318,18 +335,14 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     sides = np.ascontiguousarray(sides, dtype=np.int64)
     if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
         raise ValueError(f"anchors.shape = {anchors.shape}, sides.shape = {sides.shape}; expected (L, 3) and (L,)")
+    prefix = np.zeros((0, 3), dtype=np.int64) if prefix is None else np.ascontiguousarray(prefix, dtype=np.int64)
     box_lo = np.zeros(3, dtype=np.int64)
     bricks = np.zeros(3, dtype=np.int64)
     if anchors.shape[0]:
-        box_lo = anchors.min(axis=0)
-        box_hi = (anchors + sides[:, None]).max(axis=0)
-        if prefix is not None and len(prefix):
-            box_lo = np.minimum(box_lo, np.min(prefix, axis=0))
-            box_hi = np.maximum(box_hi, np.max(prefix, axis=0))
+        box_lo, box_hi = _bounding_box(anchors, sides, prefix)
         bricks = (box_hi - box_lo + 8) // 8
         if np.prod(bricks.astype(np.float64)) * 512 > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
             bricks = np.zeros(3, dtype=np.int64)
-    prefix = np.zeros((0, 3), dtype=np.int64) if prefix is None else np.ascontiguousarray(prefix, dtype=np.int64)
     if bricks[0] > 0:
         table, bits = np.full(int(np.prod(bricks)) * 512, -1, dtype=np.int32), 0
     else:

@@ -374,8 +374,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     met = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
     corner_class = rays.winding_numbers(x_crossings, corners.coords) > 0
-    corner_inside = corner_class[corners.corner_ids]
-    is_cut = corner_inside.any(axis=1) & ~corner_inside.all(axis=1)
+    is_cut = _mixed_cells(corners.corner_ids, corner_class)
     cut_keys = met[is_cut]
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
@@ -445,6 +444,19 @@ def _spread_leaf_classes(corner_ids, split_row, split_ids, inside, n_band):
             for p in range(split_ids.shape[1]):
                 if split_ids[r, p] >= n_band:
                     inside[split_ids[r, p]] = leaf_inside
+
+
+@nb.njit(cache=True)
+def _mixed_cells(corner_ids, corner_class):
+    """Mask (L,) of the cells with corners of both classes."""
+    out = np.zeros(corner_ids.shape[0], dtype=np.bool_)
+    for i in range(corner_ids.shape[0]):
+        first = corner_class[corner_ids[i, 0]]
+        for c in range(1, 8):
+            if corner_class[corner_ids[i, c]] != first:
+                out[i] = True
+                break
+    return out
 
 
 def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices, np.ndarray]:
