@@ -145,6 +145,26 @@ def _cell_of(tri, t, wa, wb, wc, dd, unit_bits):
 
 
 @nb.njit(cache=True, inline="always")
+def _column_span(tri, py):
+    """(lowest, highest) coordinate 2, as floats, of the triangle's projection (coordinates 1
+    and 2) on the line coordinate 1 = py; (inf, -inf) if it misses the line."""
+    lo = np.inf
+    hi = -np.inf
+    for i in range(3):
+        j = (i + 1) % 3
+        y1, z1, y2, z2 = tri[i, 1], tri[i, 2], tri[j, 1], tri[j, 2]
+        if min(y1, y2) <= py <= max(y1, y2):
+            if y1 == y2:
+                lo = min(lo, float(min(z1, z2)))
+                hi = max(hi, float(max(z1, z2)))
+            else:
+                z = float(z1) + float(z2 - z1) * (float(py - y1) / float(y2 - y1))
+                lo = min(lo, z)
+                hi = max(hi, z)
+    return lo, hi
+
+
+@nb.njit(cache=True, inline="always")
 def _pack(r2, r3, j):
     return ((r2 + _KEY_OFFSET) << (2 * _KEY_BITS)) | ((r3 + _KEY_OFFSET) << _KEY_BITS) | (j + _KEY_OFFSET)
 
@@ -175,7 +195,14 @@ def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, 
             r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
             k = 0 if counting else offsets[f]
             for r2 in range(r2a, r2b + 1):
-                for r3 in range(r3a, r3b + 1):
+                # Only the rows near the projection's span in this column (a row of margin
+                # covers the rounding of the float span); the exact test decides each.
+                z_lo, z_hi = _column_span(tri, r2 * unit)
+                if z_lo > z_hi:
+                    continue
+                first = max(r3a, np.int64(np.floor(z_lo / unit)) - 1)
+                last = min(r3b, np.int64(np.ceil(z_hi / unit)) + 1)
+                for r3 in range(first, last + 1):
                     hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
                     if not hit:
                         continue
