@@ -472,7 +472,7 @@ def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices,
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
     """Cut points of every lattice edge of the tets whose ends differ in class."""
-    mixed = np.ascontiguousarray(tets[mixed_tets(tets, inside)])
+    mixed = mixed_tets(np.ascontiguousarray(tets), inside)
     starts, ends, dirs, *table = collect_cut_edges(mixed, inside, coords)
     fracs = np.empty(starts.shape[0])
     for d in range(EDGE_DIRECTIONS.shape[0]):
@@ -484,8 +484,19 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
         f, unresolved = rays.edge_cut_fractions(crossings[d], coords[starts[sel]], inside[starts[sel]])
         fracs[sel] = f
         report.unresolved_cuts += int(unresolved.sum())
-    u = coords[starts] + fracs[:, None] * (coords[ends] - coords[starts])
-    return CutEdges(starts, ends, dirs, fracs, frame.to_space(u), tuple(table))
+    return CutEdges(starts, ends, dirs, fracs, frame.to_space(_along_edges(coords, starts, ends, fracs)), tuple(table))
+
+
+@nb.njit(cache=True)
+def _along_edges(coords, starts, ends, fracs):
+    """Points (E, 3) float64 at fraction fracs[e] from coords[starts[e]] to coords[ends[e]]
+    (coords[starts] + fracs[:, None] * (coords[ends] - coords[starts]), same rounding)."""
+    out = np.empty((starts.shape[0], 3))
+    for e in range(starts.shape[0]):
+        for i in range(3):
+            a = coords[starts[e], i]
+            out[e, i] = float(a) + fracs[e] * float(coords[ends[e], i] - a)
+    return out
 
 
 def _compact(points, tets):

@@ -33,13 +33,23 @@ _EDGE_PAIRS = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=n
 _DIRECTION_OF_BITS = np.array([-1, 0, 1, 3, 2, 4, 5, 6], dtype=np.int64)
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def mixed_tets(tets, inside):
-    """Mask (M,) of tets whose vertices are not all of one class."""
-    out = np.empty(tets.shape[0], dtype=np.bool_)
-    for t in nb.prange(tets.shape[0]):
+    """The tets (K, 4) whose vertices are not all of one class, in order (tets[mask] without
+    the mask and numpy's slow boolean row gather)."""
+    n = 0
+    for t in range(tets.shape[0]):
         c = inside[tets[t, 0]]
-        out[t] = c != inside[tets[t, 1]] or c != inside[tets[t, 2]] or c != inside[tets[t, 3]]
+        if c != inside[tets[t, 1]] or c != inside[tets[t, 2]] or c != inside[tets[t, 3]]:
+            n += 1
+    out = np.empty((n, 4), dtype=tets.dtype)
+    n = 0
+    for t in range(tets.shape[0]):
+        c = inside[tets[t, 0]]
+        if c != inside[tets[t, 1]] or c != inside[tets[t, 2]] or c != inside[tets[t, 3]]:
+            for i in range(4):
+                out[n, i] = tets[t, i]
+            n += 1
     return out
 
 
