@@ -256,6 +256,9 @@ def _leaf_tets(corner_ids, split_row, split_ids, marked, chains, chain_odd, chai
     counts = np.zeros(n + 1, dtype=np.int64)
     bad = np.zeros(n, dtype=np.bool_)
     for i in nb.prange(n):
+        if split_row[i] < 0 and (marked[corner_ids[i, 0]] or marked[corner_ids[i, 7]]):
+            counts[i + 1] = 6  # the common case: six fat tets, all through corners 0 and 7
+            continue
         labels = np.empty(9, dtype=np.int64)
         k = 0
         for c in range(6):
@@ -270,8 +273,16 @@ def _leaf_tets(corner_ids, split_row, split_ids, marked, chains, chain_odd, chai
     offsets = np.cumsum(counts)
     tets = np.empty((offsets[n], 4), dtype=np.int32)
     for i in nb.prange(n):
-        labels = np.empty(9, dtype=np.int64)
         k = offsets[i]
+        if offsets[i + 1] - k == 6 and split_row[i] < 0:
+            for c in range(6):  # the six fat tets (template 0 of each chain), as below
+                tets[k, 0] = corner_ids[i, chains[c, 0]]
+                tets[k, 1] = corner_ids[i, chains[c, 2 if chain_odd[c] else 1]]
+                tets[k, 2] = corner_ids[i, chains[c, 1 if chain_odd[c] else 2]]
+                tets[k, 3] = corner_ids[i, chains[c, 3]]
+                k += 1
+            continue
+        labels = np.empty(9, dtype=np.int64)
         for c in range(6):
             mask = _chain_template(corner_ids, split_row, split_ids, i, c, chains, chain_splits, labels)
             if tmpl_counts[mask] < 0:
