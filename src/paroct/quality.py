@@ -102,6 +102,16 @@ def _measure_block(corners, n, out):
 
 
 @nb.njit(cache=True, inline="always")
+def _measure_tets(points, tets, start, end, corners, out):
+    """Gather and measure the block of tets from start (at most BLOCK, not past end) into out;
+    returns how many."""
+    n = min(BLOCK, end - start)
+    _gather(points, tets, start, n, corners)
+    _measure_block(corners, n, out)
+    return n
+
+
+@nb.njit(cache=True, inline="always")
 def _degrees(cosine):
     return math.degrees(math.acos(cosine))
 
@@ -114,9 +124,7 @@ def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max
         out = np.empty((4, BLOCK))
         end = m * (chunk + 1) // n_chunks
         for start in range(m * chunk // n_chunks, end, BLOCK):
-            n = min(BLOCK, end - start)
-            _gather(points, tets, start, n, corners)
-            _measure_block(corners, n, out)
+            n = _measure_tets(points, tets, start, end, corners, out)
             for j in range(n):
                 volume[start + j] = out[_VOL, j]
                 radius_ratio[start + j] = out[_RATIO, j]
@@ -186,9 +194,7 @@ def _summarize(points, tets, core, fat_ratio, partial, fat_count):
         fat = 0
         end = m * (chunk + 1) // n_chunks
         for start in range(m * chunk // n_chunks, end, BLOCK):
-            n = min(BLOCK, end - start)
-            _gather(points, tets, start, n, corners)
-            _measure_block(corners, n, out)
+            n = _measure_tets(points, tets, start, end, corners, out)
             for j in range(n):
                 c_hi, c_lo, ratio = out[_COS_HI, j], out[_COS_LO, j], out[_RATIO, j]
                 cmax = max(cmax, c_hi)
