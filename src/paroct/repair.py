@@ -184,28 +184,34 @@ def _repair(tets, bad_vertices, n_vertices, complete):
     return alive, True
 
 
-@nb.njit(cache=True, parallel=True)
-def band_mask(tets, core):
-    """Mask (M,) of the tets with a vertex that is not core (core[tets].all(axis=1) negated,
-    without its (M, 4) temporary)."""
-    out = np.empty(tets.shape[0], dtype=np.bool_)
-    for t in nb.prange(tets.shape[0]):
-        out[t] = not (core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]])
+@nb.njit(cache=True)
+def band_tets(tets, core):
+    """The tets (B, 4) with a vertex that is not core, in order (tets[~core[tets].all(axis=1)]
+    without the (M, 4) temporary and numpy's boolean row gather)."""
+    n = 0
+    for t in range(tets.shape[0]):
+        if not (core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]]):
+            n += 1
+    out = np.empty((n, 4), dtype=tets.dtype)
+    n = 0
+    for t in range(tets.shape[0]):
+        if not (core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]]):
+            for i in range(4):
+                out[n, i] = tets[t, i]
+            n += 1
     return out
 
 
-def band_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Boundary faces of a stuffed mesh from its band alone.
+def band_boundary(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Boundary faces (F, 3) of a stuffed mesh, oriented outward, from its band alone.
 
     core: (V,) True for vertices all of whose faces are interior (unwarped inside lattice
     vertices: every lattice face through three of them is kept by the stencils on both
     sides).  Only tets with a non-core vertex, the band, can then have boundary faces.
-    Returns (band (M,) mask, band face neighbours (B, 4) indexing tets[band], boundary faces (F, 3)).
     """
-    band = band_mask(tets, core)
-    band_tets = np.ascontiguousarray(tets[band])
-    neighbour, _, _ = match_faces(band_tets)
-    return band, neighbour, _open_faces(band_tets, neighbour, core)
+    band = band_tets(np.ascontiguousarray(tets), core)
+    neighbour, _, _ = match_faces(band)
+    return _open_faces(band, neighbour, core)
 
 
 @nb.njit(cache=True)
@@ -243,7 +249,7 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int,
     (local_repair) and the boundary updated around the removed tets.  core: see
     band_boundary; vertices of removed tets leave it.
     """
-    _, _, faces = band_boundary(tets, core)
+    faces = band_boundary(tets, core)
     bad = np.nonzero(nonmanifold_vertices(faces, core.shape[0]))[0]
     if bad.size == 0:
         return tets, 0, faces
