@@ -24,7 +24,7 @@ from .octree import balance, octant_lattice_anchors, octants_holding, octants_wi
 from .quality import summarize
 from .repair import remove_pinches
 from .sizing import OUTSIDE, UNDECIDED, WHOLLY_INSIDE, Region, SizeField, SizeFunction, size_field, size_seeds
-from .stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
+from .stuffing import CutEdges, collect_cut_edges, mixed_rows, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
@@ -374,7 +374,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     met = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
     corner_class = rays.winding_numbers(x_crossings, corners.coords) > 0
-    is_cut = _mixed_cells(corners.corner_ids, corner_class)
+    is_cut = mixed_rows(corners.corner_ids, corner_class)
     cut_keys = met[is_cut]
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
@@ -406,8 +406,9 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     fine = np.nonzero(levels == finest)[0]
     in_band[fine] = np.isin(keys[fine], band, assume_unique=True)
     # Leaves in a wholly inside seed are inside (balance only splits seeds); the rest are asked.
-    order = np.argsort(seed_keys[seed_inside], kind="stable")
-    keep = in_band | octants_within(keys, levels, seed_keys[seed_inside][order], seed_levels[seed_inside][order])
+    inside_keys, inside_levels = seed_keys[seed_inside], seed_levels[seed_inside]
+    order = np.argsort(inside_keys, kind="stable")
+    keep = in_band | octants_within(keys, levels, inside_keys[order], inside_levels[order])
     ask = np.nonzero(~keep)[0]
     keep[ask] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[ask], frame)) > 0
     return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
@@ -444,19 +445,6 @@ def _spread_leaf_classes(corner_ids, split_row, split_ids, inside, n_band):
             for p in range(split_ids.shape[1]):
                 if split_ids[r, p] >= n_band:
                     inside[split_ids[r, p]] = leaf_inside
-
-
-@nb.njit(cache=True)
-def _mixed_cells(corner_ids, corner_class):
-    """Mask (L,) of the cells with corners of both classes."""
-    out = np.zeros(corner_ids.shape[0], dtype=np.bool_)
-    for i in range(corner_ids.shape[0]):
-        first = corner_class[corner_ids[i, 0]]
-        for c in range(1, 8):
-            if corner_class[corner_ids[i, c]] != first:
-                out[i] = True
-                break
-    return out
 
 
 def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices, np.ndarray]:

@@ -33,20 +33,37 @@ _EDGE_PAIRS = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=n
 _DIRECTION_OF_BITS = np.array([-1, 0, 1, 3, 2, 4, 5, 6], dtype=np.int64)
 
 
+@nb.njit(cache=True, inline="always")
+def _is_mixed(ids, i, classes):
+    """True iff the vertices ids[i, :] are not all of one class."""
+    first = classes[ids[i, 0]]
+    for c in range(1, ids.shape[1]):
+        if classes[ids[i, c]] != first:
+            return True
+    return False
+
+
+@nb.njit(cache=True)
+def mixed_rows(ids, classes):
+    """Mask (N,) of the rows of vertex ids (N, K) (tets, cells' corners) whose vertices are
+    not all of one class."""
+    out = np.empty(ids.shape[0], dtype=np.bool_)
+    for i in range(ids.shape[0]):
+        out[i] = _is_mixed(ids, i, classes)
+    return out
+
+
 @nb.njit(cache=True)
 def mixed_tets(tets, inside):
     """The tets (K, 4) whose vertices are not all of one class, in order (tets[mask] without
     the mask and numpy's slow boolean row gather)."""
     n = 0
     for t in range(tets.shape[0]):
-        c = inside[tets[t, 0]]
-        if c != inside[tets[t, 1]] or c != inside[tets[t, 2]] or c != inside[tets[t, 3]]:
-            n += 1
+        n += _is_mixed(tets, t, inside)
     out = np.empty((n, 4), dtype=tets.dtype)
     n = 0
     for t in range(tets.shape[0]):
-        c = inside[tets[t, 0]]
-        if c != inside[tets[t, 1]] or c != inside[tets[t, 2]] or c != inside[tets[t, 3]]:
+        if _is_mixed(tets, t, inside):
             for i in range(4):
                 out[n, i] = tets[t, i]
             n += 1
