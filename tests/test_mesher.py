@@ -65,7 +65,7 @@ def test_boundary_vertices_lie_on_the_input_surface():
     verts = np.unique(boundary_faces(result.mesh.tets, neighbour))
     # Signed distance to the surface: angle_block is a union of planar faces; use manifold3d to
     # measure: a tiny ball around each boundary vertex must meet both inside and outside.
-    solid = surface.manifold
+    solid = surface.to_manifold()
     x = result.mesh.points[verts]
     eps = 1e-7 * surface.diagonal
     for p in x[:: max(1, len(x) // 200)]:
@@ -96,7 +96,7 @@ def test_classification_matches_manifold3d_ray_cast_reference():
     start_x = surface.bbox_min[0] - 1.0
     rng = np.random.default_rng(0)
     for i in rng.choice(len(x), size=600, replace=False):
-        hits = surface.manifold.ray_cast([start_x, x[i, 1], x[i, 2]], x[i])
+        hits = surface.to_manifold().ray_cast([start_x, x[i, 1], x[i, 2]], x[i])
         winding = sum(1 if hit.normal[0] < 0 else -1 for hit in hits)
         assert (winding > 0) == inside[i]
 

@@ -1,9 +1,11 @@
 """Load and validate the closed surface of the solid to mesh.
 
-manifold3d owns the solid: it checks that the triangles bound a 2-manifold and, when a
-file holds several shells, unions the overlapping ones (shells of negative volume are
-cavities and are subtracted).  Everything downstream works on the manifold's own
-triangles, which are closed and consistently oriented (outward normals, positive volume).
+The triangles are welded and checked here: every edge in exactly two faces of opposite
+orientation, positive enclosed volume.  A surface of one shell (faces joined through
+edges) is the solid as it is.  When a file holds several shells, manifold3d checks each
+and unions the overlapping ones (shells of negative volume are cavities and are
+subtracted), and everything downstream works on the manifold's triangles.  Either way
+they are closed and consistently oriented (outward normals, positive volume).
 """
 
 from __future__ import annotations
@@ -12,9 +14,9 @@ import contextlib
 import io
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Union
+from typing import Union
 
 import manifold3d
 import numba as nb
@@ -44,7 +46,6 @@ class Surface:
     area: float
     genus: int
     components: int
-    manifold: Any = field(default=None, repr=False, compare=False)
 
     @property
     def bbox_min(self) -> np.ndarray:
@@ -57,6 +58,10 @@ class Surface:
     @property
     def diagonal(self) -> float:
         return float(np.linalg.norm(self.bbox_max - self.bbox_min))
+
+    def to_manifold(self) -> manifold3d.Manifold:
+        """The solid as a manifold3d.Manifold (built anew on each call)."""
+        return _to_manifold(self.vertices, self.faces)
 
 
 def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -126,53 +131,164 @@ def _read_binary_stl(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
     return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
 
 
-@nb.njit(cache=True)
-def _face_components(faces, n_vertices):
-    """Component label (F,) int64 of every face, faces joined through shared vertices."""
-    parent = np.arange(n_vertices)
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    for f in range(faces.shape[0]):
-        r0 = find(faces[f, 0])
-        for k in range(1, 3):
-            r = find(faces[f, k])
-            if r != r0:
-                parent[max(r, r0)] = min(r, r0)
-                r0 = min(r, r0)
-    labels = np.empty(faces.shape[0], dtype=np.int64)
-    for f in range(faces.shape[0]):
-        labels[f] = find(faces[f, 0])
-    return labels
-
-
 def _edge_report(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int]:
     """Counts of (boundary edges, edges with more than two faces, edges whose two faces disagree in orientation)."""
     count, forward, _ = edge_multiplicities(np.ascontiguousarray(faces, dtype=np.int64), n_vertices)
     return int(np.sum(count == 1)), int(np.sum(count > 2)), int(np.sum((count == 2) & (forward != 1)))
 
 
-def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge exactly coincident vertices, drop faces with a repeated vertex.  The merged
-    vertices are sorted by (x, y, z), as np.unique(axis=0) would give them, by a three-key
-    lexsort (np.unique's row sort was 10x slower)."""
-    if vertices.shape[0] == 0:
-        return vertices, faces
-    order = np.lexsort((vertices[:, 2], vertices[:, 1], vertices[:, 0]))
-    ordered = vertices[order]
-    first = np.empty(ordered.shape[0], dtype=bool)
-    first[0] = True
-    np.any(ordered[1:] != ordered[:-1], axis=1, out=first[1:])
-    inverse = np.empty(ordered.shape[0], dtype=np.int64)
-    inverse[order] = np.cumsum(first) - 1
-    uniq = ordered[first]
-    faces = inverse[faces]
-    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    return uniq, faces[keep]
+def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Merge exactly coincident vertices (-0.0 equals 0.0), drop faces with a repeated vertex
+    and the vertices no face uses.  Vertices are numbered in the order the kept faces first
+    use them, so the result depends only on the faces and their corner positions.  The flag
+    is False (and the arrays empty) if a corner has a NaN or infinite coordinate."""
+    vertices = np.ascontiguousarray(vertices + 0.0)  # -0.0 + 0.0 is +0.0: equal values, equal bits
+    return _weld_kernel(vertices, vertices.view(np.uint64), np.ascontiguousarray(faces, dtype=np.int64))
+
+
+@nb.njit(cache=True)
+def _weld_kernel(vertices, bits, faces):
+    """Open-addressing hash of the corners' bit patterns (one pass over the faces), then the
+    compaction to the kept faces' vertices."""
+    nf = faces.shape[0]
+    size = 16
+    while size < 6 * nf:  # load factor at most 1/2 (3 corners a face)
+        size *= 2
+    table = np.full(size, -1, dtype=np.int64)
+    first = np.empty(3 * nf, dtype=np.int64)  # the input vertex standing for each merged one
+    merged = np.empty((nf, 3), dtype=np.int64)
+    m = 0
+    for f in range(nf):
+        for k in range(3):
+            v = faces[f, k]
+            if not (np.isfinite(vertices[v, 0]) and np.isfinite(vertices[v, 1]) and np.isfinite(vertices[v, 2])):
+                return np.empty((0, 3), dtype=np.float64), np.empty((0, 3), dtype=np.int64), False
+            h = (bits[v, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (bits[v, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) \
+                ^ (bits[v, 2] * np.uint64(0x165667B19E3779F9))
+            slot = np.int64((h ^ (h >> np.uint64(29))) & np.uint64(size - 1))
+            while True:
+                j = table[slot]
+                if j < 0:
+                    table[slot] = m
+                    first[m] = v
+                    merged[f, k] = m
+                    m += 1
+                    break
+                u = first[j]
+                if bits[u, 0] == bits[v, 0] and bits[u, 1] == bits[v, 1] and bits[u, 2] == bits[v, 2]:
+                    merged[f, k] = j
+                    break
+                slot = (slot + 1) & (size - 1)
+    new_id = np.full(m, -1, dtype=np.int64)
+    out_faces = np.empty((nf, 3), dtype=np.int64)
+    out_vertices = np.empty((m, 3), dtype=np.float64)
+    n_faces = 0
+    n_vertices = 0
+    for f in range(nf):
+        a = merged[f, 0]
+        b = merged[f, 1]
+        c = merged[f, 2]
+        if a == b or b == c or c == a:
+            continue
+        for k in range(3):
+            j = merged[f, k]
+            if new_id[j] < 0:
+                new_id[j] = n_vertices
+                out_vertices[n_vertices] = vertices[first[j]]
+                n_vertices += 1
+            out_faces[n_faces, k] = new_id[j]
+        n_faces += 1
+    return out_vertices[:n_vertices], out_faces[:n_faces], True
+
+
+@nb.njit(cache=True)
+def _shell_topology(faces, n_vertices):
+    """Fans and shells of a surface whose edges each join two consistently oriented faces.
+
+    A fan is a cycle of the faces around a vertex, joined through their edges at it (a
+    vertex where sheets touch has several); a shell is a set of faces joined through edges.
+    Returns (fans (total over vertices), shell label (F,) of every face, 0..S-1 in order of
+    first face).  With fans counted as vertices, V - E + F of each shell is 2 - 2 genus.
+    """
+    nf = faces.shape[0]
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            start[faces[f, j] + 1] += 1
+    for v in range(n_vertices):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    face_of = np.empty(3 * nf, dtype=np.int64)
+    nxt = np.empty(3 * nf, dtype=np.int64)
+    prv = np.empty(3 * nf, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            v = faces[f, j]
+            face_of[fill[v]] = f
+            nxt[fill[v]] = faces[f, (j + 1) % 3]
+            prv[fill[v]] = faces[f, (j + 2) % 3]
+            fill[v] += 1
+    parent = np.arange(nf)
+    seen = np.zeros(3 * nf, dtype=np.bool_)
+    fans = 0
+    for v in range(n_vertices):
+        for s in range(start[v], start[v + 1]):
+            if seen[s]:
+                continue
+            fans += 1
+            cur = s
+            while not seen[cur]:  # face (v, p, q) is followed around v by the face (v, q, r)
+                seen[cur] = True
+                following = -1
+                for t in range(start[v], start[v + 1]):
+                    if prv[t] == nxt[cur]:
+                        following = t
+                        break
+                if following < 0:
+                    break
+                a = face_of[cur]
+                b = face_of[following]
+                while parent[a] != a:
+                    parent[a] = parent[parent[a]]
+                    a = parent[a]
+                while parent[b] != b:
+                    parent[b] = parent[parent[b]]
+                    b = parent[b]
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+                cur = following
+    label = np.empty(nf, dtype=np.int64)
+    root_label = np.full(nf, -1, dtype=np.int64)
+    n_shells = 0
+    for f in range(nf):
+        r = f
+        while parent[r] != r:
+            r = parent[r]
+        if root_label[r] < 0:
+            root_label[r] = n_shells
+            n_shells += 1
+        label[f] = root_label[r]
+    return fans, label
+
+
+@nb.njit(cache=True)
+def _volume_area(vertices, faces):
+    """Enclosed volume (signed: positive for outward faces) and area of a closed surface,
+    summed about its first vertex (small numbers where the surface lies far from the origin)."""
+    ox, oy, oz = vertices[0, 0], vertices[0, 1], vertices[0, 2]
+    volume = 0.0
+    area = 0.0
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        ax, ay, az = vertices[a, 0] - ox, vertices[a, 1] - oy, vertices[a, 2] - oz
+        ux, uy, uz = vertices[b, 0] - ox - ax, vertices[b, 1] - oy - ay, vertices[b, 2] - oz - az
+        wx, wy, wz = vertices[c, 0] - ox - ax, vertices[c, 1] - oy - ay, vertices[c, 2] - oz - az
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        volume += ax * nx + ay * ny + az * nz
+        area += np.sqrt(nx * nx + ny * ny + nz * nz)
+    return volume / 6.0, area / 2.0
 
 
 def _to_manifold(vertices: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
@@ -215,22 +331,27 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(
             f"{label}: face indices span {faces.min()}..{faces.max()} but len(vertices) = {vertices.shape[0]}"
         )
-    used = np.zeros(vertices.shape[0], dtype=bool)
-    used[faces.ravel()] = True
-    if not np.all(np.isfinite(vertices[used])):
+    vertices, faces, finite = _weld(vertices, faces)
+    if not finite:
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
-    vertices, faces = _weld(vertices, faces)
     if faces.shape[0] == 0:
         raise ParoctError(f"{label}: every triangle is degenerate (repeated vertex)")
     boundary, nonmanifold, flipped = _edge_report(faces, vertices.shape[0])
     if boundary or nonmanifold or flipped:
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
 
-    labels = _face_components(faces, vertices.shape[0])
-    shells = [faces[labels == c] for c in np.unique(labels)]
+    fans, shell = _shell_topology(faces, vertices.shape[0])
+    n_shells = int(shell.max()) + 1
+    if n_shells == 1:
+        volume, area = _volume_area(vertices, faces)
+        if not volume > 0:
+            raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")
+        return Surface(vertices, faces.astype(np.int32), float(volume), float(area), _genus(fans, faces, 1), 1)
+
+    # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
     solids, cavities = [], []
-    for shell in shells:
-        part = _to_manifold(vertices, shell)
+    for c in range(n_shells):
+        part = _to_manifold(vertices, faces[shell == c])
         status = part.status()
         if status.name != "NoError":
             raise _status_error(status.name, label)
@@ -238,30 +359,28 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         if vol > 0:
             solids.append(part)
         elif vol < 0:
-            cavities.append(_to_manifold(vertices, shell[:, ::-1]))
+            cavities.append(_to_manifold(vertices, faces[shell == c][:, ::-1]))
     if not solids:
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (inside out?)")
-    if len(shells) == 1:
-        solid = solids[0]
-    else:
-        solid = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
-        if cavities:
-            solid = solid - manifold3d.Manifold.batch_boolean(cavities, manifold3d.OpType.Add)
+    solid = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
+    if cavities:
+        solid = solid - manifold3d.Manifold.batch_boolean(cavities, manifold3d.OpType.Add)
     volume = solid.volume()
     if not volume > 0:
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g})")
     out = solid.to_mesh64()
     out_vertices = np.array(out.vert_properties, dtype=np.float64)[:, :3]
-    out_faces = np.array(out.tri_verts, dtype=np.int32)
-    return Surface(
-        vertices=out_vertices,
-        faces=out_faces,
-        volume=float(volume),
-        area=float(solid.surface_area()),
-        genus=int(solid.genus()),
-        components=len(solid.decompose()) if len(shells) > 1 else 1,
-        manifold=solid,
-    )
+    out_faces = np.array(out.tri_verts, dtype=np.int64)
+    fans, shell = _shell_topology(out_faces, out_vertices.shape[0])
+    n_shells = int(shell.max()) + 1
+    return Surface(out_vertices, out_faces.astype(np.int32), float(volume), float(solid.surface_area()),
+                   _genus(fans, out_faces, n_shells), n_shells)
+
+
+def _genus(fans: int, faces: np.ndarray, n_shells: int) -> int:
+    """Genus summed over the shells: each has V - E + F = 2 - 2 genus, with every fan
+    counted as a vertex (sheets touching at a vertex are apart there) and E = 3 F / 2."""
+    return (2 * n_shells - (fans - faces.shape[0] // 2)) // 2
 
 
 def load_surface(source: SurfaceSource) -> Surface:

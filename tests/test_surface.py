@@ -1,0 +1,137 @@
+"""Loading and validating surfaces: the welding kernel against np.unique, topology, volume
+and area against manifold3d, and the same verdict as manifold3d on broken surfaces."""
+
+from pathlib import Path
+
+import manifold3d
+import numpy as np
+import pytest
+
+from paroct.errors import ParoctError
+from paroct.surface import _shell_topology, _weld, load_surface, surface_from_arrays
+
+DATA = Path(__file__).resolve().parent.parent / "data"
+
+
+def _arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
+    m = solid.to_mesh64()
+    return np.asarray(m.vert_properties)[:, :3].copy(), np.asarray(m.tri_verts).astype(np.int64)
+
+
+def _soup(vertices, faces, rng):
+    """Every corner its own vertex, in shuffled order, some zeros written as -0.0."""
+    corners = vertices[faces.ravel()]
+    corners[(corners == 0) & (rng.random(corners.shape) < 0.5)] = -0.0
+    order = rng.permutation(corners.shape[0])
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(order.shape[0])
+    return corners[order], inverse.reshape(-1, 3)
+
+
+def _naive_weld(vertices, faces):
+    """np.unique over the corners; faces with a repeated vertex dropped."""
+    corners = vertices[faces.ravel()] + 0.0
+    uniq, inverse = np.unique(corners, axis=0, return_inverse=True)
+    merged = inverse.reshape(-1, 3)
+    keep = (merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])
+    return uniq, merged[keep]
+
+
+SOLIDS = {
+    "cube": lambda: manifold3d.Manifold.cube([1.0, 2.0, 3.0]),
+    "sphere": lambda: manifold3d.Manifold.sphere(1.0, 24),
+    "frame": lambda: manifold3d.Manifold.cube([3, 3, 1]) - manifold3d.Manifold.cube([1, 1, 3]).translate([1, 1, -1]),
+    "two holes": lambda: manifold3d.Manifold.cube([5, 3, 1]) - manifold3d.Manifold.cube([1, 1, 3]).translate([1, 1, -1])
+    - manifold3d.Manifold.cube([1, 1, 3]).translate([3, 1, -1]),
+    "apart": lambda: manifold3d.Manifold.cube([1, 1, 1]) + manifold3d.Manifold.sphere(0.5, 16).translate([3, 0, 0]),
+}
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_weld_matches_np_unique_on_shuffled_soups(seed):
+    rng = np.random.default_rng(seed)
+    vertices, faces = _arrays(manifold3d.Manifold.sphere(1.0, 20).translate([0.0, -1.0, 0.0]))
+    soup, soup_faces = _soup(vertices, faces, rng)
+    # Degenerate faces (a repeated vertex) and an unused NaN vertex must both go.
+    soup_faces = np.vstack([soup_faces, soup_faces[:3, [0, 0, 1]]])
+    soup = np.vstack([soup, [[np.nan, 0.0, 0.0]]])
+    welded, welded_faces, finite = _weld(soup, soup_faces)
+    uniq, merged = _naive_weld(soup, soup_faces)
+    assert finite
+    assert welded.shape == uniq.shape and welded_faces.shape == merged.shape
+    # Same triangles, corner by corner, and no vertex left unused.
+    assert np.array_equal(welded[welded_faces], uniq[merged])
+    assert np.array_equal(np.unique(welded_faces), np.arange(welded.shape[0]))
+    assert not np.any(np.signbit(welded[welded == 0]))
+
+
+def test_weld_reports_a_non_finite_corner():
+    vertices, faces = _arrays(SOLIDS["cube"]())
+    assert _weld(vertices, faces)[2]
+    vertices[faces[5, 1], 2] = np.inf
+    assert not _weld(vertices, faces)[2]
+
+
+@pytest.mark.parametrize("name", sorted(SOLIDS))
+def test_volume_area_genus_and_shells_match_manifold3d(name):
+    solid = SOLIDS[name]()
+    surface = surface_from_arrays(*_arrays(solid))
+    assert surface.volume == pytest.approx(solid.volume(), rel=1e-12)
+    assert surface.area == pytest.approx(solid.surface_area(), rel=1e-12)
+    assert surface.genus == solid.genus() + (len(solid.decompose()) - 1)  # manifold3d: 1 - chi / 2 over all shells
+    assert surface.components == len(solid.decompose())
+
+
+def test_sheets_touching_at_a_vertex_are_two_shells_of_genus_zero():
+    vertices, faces = _arrays(manifold3d.Manifold.cube([1.0, 1.0, 1.0]))
+    pair = np.vstack([vertices, vertices + 1.0]), np.vstack([faces, faces + len(vertices)])
+    welded, welded_faces, _ = _weld(*pair)
+    fans, shell = _shell_topology(welded_faces, welded.shape[0])
+    assert welded.shape[0] == 15 and fans == 16  # the shared corner: one vertex, two fans
+    assert np.array_equal(np.unique(shell), [0, 1])
+    both = surface_from_arrays(*pair)
+    assert (both.components, both.genus) == (2, 0)
+    assert both.volume == pytest.approx(2.0)
+
+
+def test_corpus_part_loads_as_manifold3d_sees_it():
+    surface = load_surface(DATA / "bunny.stl")
+    solid = surface.to_manifold()
+    assert solid.status().name == "NoError"
+    assert surface.volume == pytest.approx(solid.volume(), rel=1e-12)
+    assert (surface.components, surface.genus) == (1, solid.genus())
+
+
+def _flip_one(v, f, rng):
+    f = f.copy()
+    i = rng.integers(f.shape[0])
+    f[i] = f[i, ::-1]
+    return v, f
+
+
+def _drop_one(v, f, rng):
+    return v, np.delete(f, rng.integers(f.shape[0]), axis=0)
+
+
+def _duplicate_one(v, f, rng):
+    return v, np.vstack([f, f[rng.integers(f.shape[0])][None]])
+
+
+def _inside_out(v, f, rng):
+    return v, f[:, ::-1].copy()
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("break_it,match", [
+    (_flip_one, "inconsistently oriented"),
+    (_drop_one, "open surface, 3 boundary edges"),
+    (_duplicate_one, "non-manifold surface, 3 edges"),
+    (_inside_out, "negative volume"),
+])
+def test_broken_surfaces_are_refused_as_manifold3d_refuses_them(seed, break_it, match):
+    rng = np.random.default_rng(seed)
+    vertices, faces = break_it(*_arrays(SOLIDS["frame"]()), rng)
+    with pytest.raises(ParoctError, match=match):
+        surface_from_arrays(vertices, faces)
+    theirs = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=faces.astype(np.uint64)))
+    assert theirs.status().name != "NoError" or theirs.volume() <= 0
