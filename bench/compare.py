@@ -2,12 +2,13 @@
 
     python bench/compare.py [FOLDER] [--divisions 40 80] [--meshers paroct tetgen ...]
                             [--models bunny fandisk] [--time-limit 300] [--memory-limit 8]
-                            [--json results.json] [--markdown tables.md]
+                            [--repeat 1] [--json results.json] [--markdown tables.md]
     python bench/compare.py --from-json results40.json results80.json [--markdown tables.md]
 
 Peers come from the optional extra: pip install -e ".[bench]".  Each run is a subprocess
 of this script (``--child``) with a wall-time limit and an address-space limit; it meshes
-once (the mesher call alone is timed, reading the surface included; paroct's cached numba
+once (``--repeat N``: N children, the fastest counts, the same rule for every mesher; the
+mesher call alone is timed, reading the surface included; paroct's cached numba
 kernels are loaded before) and saves the mesh; peak memory is the child's peak RSS above
 its level before the call.  The parent measures every mesh
 with the same function, paroct.check.mesh_metrics, against the input surface.  Failures
@@ -139,8 +140,9 @@ def _warm_paroct() -> None:
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
 
 
-def measure(mesher: str, model: Path, size: float, time_limit: float, memory_limit: float) -> dict:
-    """One run in a child process, measured; a dict with 'status' 'ok' or the failure."""
+def measure(mesher: str, model: Path, size: float, time_limit: float, memory_limit: float, repeat: int = 1) -> dict:
+    """``repeat`` runs, each in a child process; the fastest one's time and peak memory, the
+    mesh measured; a dict with 'status' 'ok' or the first failure."""
     from paroct.check import mesh_metrics
     from paroct.surface import load_surface
 
@@ -149,21 +151,24 @@ def measure(mesher: str, model: Path, size: float, time_limit: float, memory_lim
         out = Path(tmp) / "mesh.npz"
         cmd = [sys.executable, __file__, "--child", "--mesher", mesher, "--model", str(model), "--size", repr(size),
                "--out", str(out), "--memory-limit", str(memory_limit)]
-        try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit)
-        except subprocess.TimeoutExpired:
-            return {**row, "status": f"timeout after {time_limit:.0f} s"}
-        if proc.returncode != 0 or not out.exists():
-            lines = [s for s in (proc.stderr or "").strip().splitlines() if s.strip()]
-            reason = lines[-1][:120] if lines else f"exit code {proc.returncode}"
-            if "MemoryError" in (proc.stderr or "") or "bad_alloc" in (proc.stderr or ""):
-                reason = f"memory limit {memory_limit:g} GiB: {reason}"
-            return {**row, "status": f"failed: {reason}"}
-        data = np.load(out)
-        points, tets = data["points"], data["tets"]
-        if tets.shape[0] == 0:
-            return {**row, "status": "failed: no tets"}
-        row.update(seconds=float(data["seconds"]), peak_bytes=int(data["peak"]))
+        for _ in range(repeat):
+            out.unlink(missing_ok=True)
+            try:
+                proc = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit)
+            except subprocess.TimeoutExpired:
+                return {**row, "status": f"timeout after {time_limit:.0f} s"}
+            if proc.returncode != 0 or not out.exists():
+                lines = [s for s in (proc.stderr or "").strip().splitlines() if s.strip()]
+                reason = lines[-1][:120] if lines else f"exit code {proc.returncode}"
+                if "MemoryError" in (proc.stderr or "") or "bad_alloc" in (proc.stderr or ""):
+                    reason = f"memory limit {memory_limit:g} GiB: {reason}"
+                return {**row, "status": f"failed: {reason}"}
+            data = np.load(out)
+            points, tets = data["points"], data["tets"]
+            if tets.shape[0] == 0:
+                return {**row, "status": "failed: no tets"}
+            if float(data["seconds"]) < row.get("seconds", np.inf):
+                row.update(seconds=float(data["seconds"]), peak_bytes=int(data["peak"]))
     row.update(mesh_metrics(points, tets, load_surface(model)))
     row["tets_per_s"] = row["tets"] / row["seconds"]
     row["bytes_per_tet"] = row["peak_bytes"] / row["tets"]
@@ -243,6 +248,7 @@ def main(argv=None) -> int:
     ap.add_argument("--models", nargs="+", help="model names (file stems) to run; default all")
     ap.add_argument("--time-limit", type=float, default=300.0, help="seconds per run")
     ap.add_argument("--memory-limit", type=float, default=8.0, help="GiB of address space per run")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per mesher, model and size; the fastest counts")
     ap.add_argument("--json", help="write all rows to this file")
     ap.add_argument("--markdown", help="write per-level summary tables (markdown) to this file")
     ap.add_argument("--from-json", nargs="+", help="only tabulate rows saved by earlier --json runs")
@@ -277,7 +283,7 @@ def main(argv=None) -> int:
         for f in files:
             size = load_surface(f).diagonal / div
             for mesher in args.meshers:
-                row = measure(mesher, f, size, args.time_limit, args.memory_limit)
+                row = measure(mesher, f, size, args.time_limit, args.memory_limit, args.repeat)
                 row["divisions"] = div
                 rows.append(row)
                 print(format_row(row), flush=True)
