@@ -23,7 +23,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
-from .topology import edge_multiplicities
+from .topology import edge_multiplicities, union, vertex_links
 
 #: Surface formats read through meshio, by file extension.
 SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply")
@@ -211,23 +211,7 @@ def _shell_topology(faces, n_vertices):
     first face).  With fans counted as vertices, V - E + F of each shell is 2 - 2 genus.
     """
     nf = faces.shape[0]
-    start = np.zeros(n_vertices + 1, dtype=np.int64)
-    for f in range(nf):
-        for j in range(3):
-            start[faces[f, j] + 1] += 1
-    for v in range(n_vertices):
-        start[v + 1] += start[v]
-    fill = start[:-1].copy()
-    face_of = np.empty(3 * nf, dtype=np.int64)
-    nxt = np.empty(3 * nf, dtype=np.int64)
-    prv = np.empty(3 * nf, dtype=np.int64)
-    for f in range(nf):
-        for j in range(3):
-            v = faces[f, j]
-            face_of[fill[v]] = f
-            nxt[fill[v]] = faces[f, (j + 1) % 3]
-            prv[fill[v]] = faces[f, (j + 2) % 3]
-            fill[v] += 1
+    start, face_of, nxt, prv = vertex_links(faces, n_vertices)
     parent = np.arange(nf)
     seen = np.zeros(3 * nf, dtype=np.bool_)
     fans = 0
@@ -237,7 +221,7 @@ def _shell_topology(faces, n_vertices):
                 continue
             fans += 1
             cur = s
-            while not seen[cur]:  # face (v, p, q) is followed around v by the face (v, q, r)
+            while not seen[cur]:  # face (v, p, q) is followed around v by the face (v, r, p)
                 seen[cur] = True
                 following = -1
                 for t in range(start[v], start[v + 1]):
@@ -246,16 +230,7 @@ def _shell_topology(faces, n_vertices):
                         break
                 if following < 0:
                     break
-                a = face_of[cur]
-                b = face_of[following]
-                while parent[a] != a:
-                    parent[a] = parent[parent[a]]
-                    a = parent[a]
-                while parent[b] != b:
-                    parent[b] = parent[parent[b]]
-                    b = parent[b]
-                if a != b:
-                    parent[max(a, b)] = min(a, b)
+                union(parent, face_of[cur], face_of[following])
                 cur = following
     label = np.empty(nf, dtype=np.int64)
     root_label = np.full(nf, -1, dtype=np.int64)

@@ -147,6 +147,32 @@ def edge_multiplicities(faces, n_vertices):
 
 
 @nb.njit(cache=True)
+def vertex_links(faces, n_vertices):
+    """The faces around every vertex, as the edges of its link: for s in start[v]..start[v+1]-1,
+    face face_of[s] is (v, nxt[s], prv[s]) in its own orientation.  Returns (start (V+1,),
+    face_of, nxt, prv (3F,)) int64, a counting sort of the corners by vertex."""
+    nf = faces.shape[0]
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            start[faces[f, j] + 1] += 1
+    for v in range(n_vertices):
+        start[v + 1] += start[v]
+    face_of = np.empty(3 * nf, dtype=np.int64)
+    nxt = np.empty(3 * nf, dtype=np.int64)
+    prv = np.empty(3 * nf, dtype=np.int64)
+    fill = start[:-1].copy()
+    for f in range(nf):
+        for j in range(3):
+            v = faces[f, j]
+            face_of[fill[v]] = f
+            nxt[fill[v]] = faces[f, (j + 1) % 3]
+            prv[fill[v]] = faces[f, (j + 2) % 3]
+            fill[v] += 1
+    return start, face_of, nxt, prv
+
+
+@nb.njit(cache=True)
 def nonmanifold_vertices(faces, n_vertices):
     """Mask (V,) of surface vertices whose incident faces do not form exactly one closed fan.
 
@@ -154,23 +180,7 @@ def nonmanifold_vertices(faces, n_vertices):
     vertex has every link vertex leaving exactly once and the walk closing after all faces.
     Vertices on an edge shared by other than two faces fail it too.
     """
-    nf = faces.shape[0]
-    deg = np.zeros(n_vertices + 1, dtype=np.int64)
-    for f in range(nf):
-        for j in range(3):
-            deg[faces[f, j] + 1] += 1
-    for v in range(n_vertices):
-        deg[v + 1] += deg[v]
-    # For vertex v, its faces give link edges (next -> prev) around v.
-    nxt = np.empty(3 * nf, dtype=np.int64)
-    prv = np.empty(3 * nf, dtype=np.int64)
-    fill = deg[:-1].copy()
-    for f in range(nf):
-        for j in range(3):
-            v = faces[f, j]
-            nxt[fill[v]] = faces[f, (j + 1) % 3]
-            prv[fill[v]] = faces[f, (j + 2) % 3]
-            fill[v] += 1
+    deg, _, nxt, prv = vertex_links(faces, n_vertices)
     bad = np.zeros(n_vertices, dtype=np.bool_)
     for v in range(n_vertices):
         lo = deg[v]
@@ -203,20 +213,27 @@ def nonmanifold_vertices(faces, n_vertices):
 
 
 @nb.njit(cache=True)
+def union(parent, a, b):
+    """Joins the sets of a and b in the union-find forest ``parent`` (path halving; the
+    smaller root becomes the root of both)."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    while parent[b] != b:
+        parent[b] = parent[parent[b]]
+        b = parent[b]
+    if a != b:
+        parent[max(a, b)] = min(a, b)
+
+
+@nb.njit(cache=True)
 def _components(faces, n_vertices):
     parent = np.arange(n_vertices)
     for f in range(faces.shape[0]):
         for j in range(1, 3):
             a = faces[f, 0]
             b = faces[f, j]
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            while parent[b] != b:
-                parent[b] = parent[parent[b]]
-                b = parent[b]
-            if a != b:
-                parent[max(a, b)] = min(a, b)
+            union(parent, a, b)
     used = np.zeros(n_vertices, dtype=np.bool_)
     for f in range(faces.shape[0]):
         for j in range(3):
