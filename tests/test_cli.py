@@ -159,6 +159,11 @@ def _nan_box(tmp_path):
     return _write_surface(tmp_path / "nan.stl", v, f)
 
 
+def _inside_out_box(tmp_path):
+    v, f = _surface_arrays()
+    return _write_surface(tmp_path / "inside_out.stl", v, f[:, ::-1])
+
+
 def _unknown_extension(tmp_path):
     path = tmp_path / "part.xyz"
     path.write_text("1 2 3\n")
@@ -172,6 +177,7 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", _unknown_extension(t)], "unknown surface format '.xyz'"),
         (lambda t, s: ["mesh", _open_box(t)], r"open surface, \d+ boundary edges"),
         (lambda t, s: ["mesh", _nan_box(t)], "NaN"),
+        (lambda t, s: ["mesh", _inside_out_box(t)], r"negative volume \(volume = -0.48, inside out\?\)"),
         (lambda t, s: ["mesh", _written(t / "cut.stl", b"solid x\nfacet normal 0 0 1\n")], "cannot read .* as STL"),
         (lambda t, s: ["mesh", _written(t / "none.stl", bytes(84))], "empty surface"),
         (lambda t, s: ["mesh", s, "--size", "0"], "size = 0"),

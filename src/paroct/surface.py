@@ -326,7 +326,8 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
     solids, cavities = [], []
     for c in range(n_shells):
-        part = _to_manifold(vertices, faces[shell == c])
+        shell_faces = faces[shell == c]
+        part = _to_manifold(vertices, shell_faces)
         status = part.status()
         if status.name != "NoError":
             raise _status_error(status.name, label)
@@ -334,7 +335,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         if vol > 0:
             solids.append(part)
         elif vol < 0:
-            cavities.append(_to_manifold(vertices, faces[shell == c][:, ::-1]))
+            cavities.append(_to_manifold(vertices, shell_faces[:, ::-1]))
     if not solids:
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (inside out?)")
     solid = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
