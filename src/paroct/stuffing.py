@@ -76,7 +76,9 @@ def collect_cut_edges(tets, inside, coords):
 
     Returns (starts (E,) vertex ids, ends (E,), directions (E,) index into EDGE_DIRECTIONS,
     then the lookup table (first, last, partner, edge): the edges whose smaller end is a are
-    partner[first[a]:last[a]] with indices edge[...]); end - start = side * direction.
+    partner[first[a]:last[a]] with indices edge[...]); end - start = EDGE_DIRECTIONS[direction]
+    for the unit lattice edges, whose ends are ordered so; direction -1 for other edges (of
+    coarser lattices or transition templates).
     Edges are bucketed by their smaller end (a counting sort): vertex ids are spatially
     coherent, so buckets of nearby tets are near each other in memory.
     """
@@ -120,7 +122,7 @@ def collect_cut_edges(tets, inside, coords):
             bits3 = (1 if dx > 0 else 0) | (2 if dy > 0 else 0) | (4 if dz > 0 else 0)
             starts[n] = p
             ends[n] = q
-            dirs[n] = _DIRECTION_OF_BITS[bits3]
+            dirs[n] = _DIRECTION_OF_BITS[bits3] if _lattice_step(dx, dy, dz, 1) else -1
             n += 1
     return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), first, last, partner, edge
 
@@ -218,12 +220,9 @@ PRISM_TETS = _prism_triangulations()
 
 
 @nb.njit(cache=True, inline="always")
-def _bcc(coords, v, i):
-    """Coordinate i of lattice vertex v in doubled BCC coordinates y = 2 M u (integers;
+def _bcc(u0, u1, u2, i):
+    """Coordinate i of lattice point u in doubled BCC coordinates y = 2 M u (integers;
     all even on the cube grid, all odd at cube centres); see frame.LATTICE_TO_SPACE."""
-    u0 = coords[v, 0]
-    u1 = coords[v, 1]
-    u2 = coords[v, 2]
     if i == 0:
         return u0 + u1 - u2
     if i == 1:
@@ -232,30 +231,66 @@ def _bcc(coords, v, i):
 
 
 @nb.njit(cache=True, inline="always")
-def _is_long(coords, a, b):
-    """Edge ab is long (black: grid corner to corner or centre to centre) iff a and b have the same parity."""
-    return ((coords[a, 0] + coords[a, 1] + coords[a, 2] - coords[b, 0] - coords[b, 1] - coords[b, 2]) & 1) == 0
+def _lattice_step(dx, dy, dz, s):
+    """True iff (dx, dy, dz) is s or -s times a Freudenthal edge direction (a vector of
+    {0, 1}^3 other than 0): an edge of the lattice of spacing s."""
+    if dx == 0 and dy == 0 and dz == 0:
+        return False
+    pos = (dx == 0 or dx == s) and (dy == 0 or dy == s) and (dz == 0 or dz == s)
+    neg = (dx == 0 or dx == -s) and (dy == 0 or dy == -s) and (dz == 0 or dz == -s)
+    return pos or neg
+
+
+@nb.njit(cache=True, inline="always")
+def _face_spacing(coords, a, b, e):
+    """The spacing s (a power of two) of the lattice whose Freudenthal triangulation has the
+    triangle (a, b, e) as a face: its corners are multiples of s and its three edges are
+    lattice edges of spacing s; 0 if there is none (a face of a transition template that
+    crosses the lattices, such as corner, corner, face centre of a coarse leaf)."""
+    s = max(abs(coords[b, 0] - coords[a, 0]), abs(coords[b, 1] - coords[a, 1]), abs(coords[b, 2] - coords[a, 2]))
+    if s == 0 or (s & (s - 1)) != 0:
+        return 0
+    for i in range(3):
+        if coords[a, i] % s != 0:
+            return 0
+    if not _lattice_step(coords[b, 0] - coords[a, 0], coords[b, 1] - coords[a, 1], coords[b, 2] - coords[a, 2], s):
+        return 0
+    if not _lattice_step(coords[e, 0] - coords[a, 0], coords[e, 1] - coords[a, 1], coords[e, 2] - coords[a, 2], s):
+        return 0
+    if not _lattice_step(coords[e, 0] - coords[b, 0], coords[e, 1] - coords[b, 1], coords[e, 2] - coords[b, 2], s):
+        return 0
+    return s
 
 
 @nb.njit(cache=True, inline="always")
 def _quad_first_diagonal(coords, a, b, e):
-    """Diagonal of the quad (a, b, cut(b, e), cut(a, e)) on lattice face (a, b, e), a and b inside.
+    """Diagonal of the quad (a, b, cut(b, e), cut(a, e)) on face (a, b, e), a and b inside.
 
-    True: the diagonal joins a to cut(b, e); False: b to cut(a, e).  Labelle & Shewchuk's rule,
-    as in Epic's and Zheng's implementations: if ab is short, the diagonal joins the cut on the
-    face's long edge to the inside vertex off that edge; if ab is long, the parity rule: with k
-    the number of coordinates in which a exceeds cut(b, e), take a-cut(b, e) when k is odd for
-    an edge of grid corners, even for an edge of cube centres.  It depends on the face alone
-    (neighbouring tets agree) and not on where the cut lies on the open edge, so the exact
-    test compares 2a with b + e.
+    True: the diagonal joins a to cut(b, e); False: b to cut(a, e).  It depends on the face
+    alone, so the two tets sharing the face agree.  On a face of the Freudenthal lattice of
+    some spacing s (_face_spacing; every face when the band is one level), Labelle &
+    Shewchuk's rule in that lattice's coordinates u / s, as in Epic's and Zheng's
+    implementations: if ab is short, the diagonal joins the cut on the face's long edge to
+    the inside vertex off that edge; if ab is long, the parity rule: with k the number of
+    coordinates in which a exceeds cut(b, e), take a-cut(b, e) when k is odd for an edge of
+    grid corners, even for an edge of cube centres (the exact test compares 2a with b + e,
+    as the rule does not depend on where the cut lies on the open edge).  On any other face
+    (transition templates), the diagonal at the smaller vertex id.
     """
-    if not _is_long(coords, a, b):
-        return not _is_long(coords, a, e)
+    s = _face_spacing(coords, a, b, e)
+    if s == 0:
+        return a < b
+    a0, a1, a2 = coords[a, 0] // s, coords[a, 1] // s, coords[a, 2] // s
+    b0, b1, b2 = coords[b, 0] // s, coords[b, 1] // s, coords[b, 2] // s
+    e0, e1, e2 = coords[e, 0] // s, coords[e, 1] // s, coords[e, 2] // s
+    a_sum = a0 + a1 + a2
+    if ((a_sum - b0 - b1 - b2) & 1) != 0:  # ab short (grid corner to cube centre)
+        return ((a_sum - e0 - e1 - e2) & 1) != 0  # ae short too: the long edge is be
     k = 0
     for i in range(3):
-        if 2 * _bcc(coords, a, i) > _bcc(coords, b, i) + _bcc(coords, e, i):
+        if 2 * _bcc(a0, a1, a2, i) > _bcc(b0, b1, b2, i) + _bcc(e0, e1, e2, i):
             k += 1
-    corners = ((coords[a, 0] + coords[a, 1] + coords[a, 2]) & 1) == 0
+    corners = (a_sum & 1) == 0
     return (k & 1) == (1 if corners else 0)
 
 
@@ -292,6 +327,33 @@ def _sign_pattern(tets, t, signs, plus, zero, minus):
             zero[n_z] = v
             n_z += 1
     return n_p, n_z, n_m
+
+
+@nb.njit(cache=True, inline="always")
+def _prism_choice(coords, plus, minus, n_p, prism):
+    """Quad diagonals (PRISM_TETS index) of the prism of a ++-- or +++- tet; -1 when the three
+    quads' rules cycle, which they never do on lattice tets of any spacing and transition
+    templates (tests/test_stuffing.py tries every tet and outside vertex of random octrees).
+
+    ++--: prism (a, cut ac, cut ad | b, cut bc, cut bd); quads 0 = (a, cut ac, cut bc, b) and
+    2 = (cut ad, a, b, cut bd) lie on the faces abc and abd, quad 1 on the cut surface is free:
+    the two face rules leave it one non-cyclic choice.  +++-: prism (p0, p1, p2 | their cuts to
+    the minus vertex), every quad on a face of the tet."""
+    choice = 0
+    if n_p == 2:
+        a = plus[0]
+        b = plus[1]
+        if not _quad_first_diagonal(coords, a, b, minus[0]):
+            choice |= 1
+        if _quad_first_diagonal(coords, a, b, minus[1]):
+            choice |= 4
+        if prism[choice, 0, 0] < 0:
+            choice |= 2
+        return choice
+    for i in range(3):
+        if not _quad_first_diagonal(coords, plus[i], plus[(i + 1) % 3], minus[0]):
+            choice |= 1 << i
+    return choice if prism[choice, 0, 0] >= 0 else -1
 
 
 @nb.njit(cache=True, inline="always")
@@ -357,39 +419,18 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
             _emit(out, k, z, a, b, cae)
             _emit(out, k + 1, z, b, cbe, cae)
         return 1
-    # Prisms: 2 + and 2 -, or 3 + and 1 -.
+    # Prisms: 2 + and 2 -, or 3 + and 1 -, laid out as PRISM_TETS expects.
     if n_p == 2:
-        a = plus[0]
-        b = plus[1]
-        c = minus[0]
-        d = minus[1]
-        pv[0] = a
-        pv[1] = _cut_id(table, n_lattice, a, c)
-        pv[2] = _cut_id(table, n_lattice, a, d)
-        pv[3] = b
-        pv[4] = _cut_id(table, n_lattice, b, c)
-        pv[5] = _cut_id(table, n_lattice, b, d)
-        choice = 0
-        # quad 0 = (a, cut ac, cut bc, b): bit 0 clear joins a to cut bc.
-        if not _quad_first_diagonal(coords, a, b, c):
-            choice |= 1
-        # quad 2 = (cut ad, a, b, cut bd): bit 2 set joins a to cut bd.
-        if _quad_first_diagonal(coords, a, b, d):
-            choice |= 4
-        # quad 1 lies on the cut surface; the two lattice faces' diagonals leave one
-        # non-cyclic choice for it (the rule always crosses them).
-        if prism[choice, 0, 0] < 0:
-            choice |= 2
+        for i in range(2):
+            pv[3 * i] = plus[i]
+            pv[3 * i + 1] = _cut_id(table, n_lattice, plus[i], minus[0])
+            pv[3 * i + 2] = _cut_id(table, n_lattice, plus[i], minus[1])
     else:
         for i in range(3):
             pv[i] = plus[i]
             pv[3 + i] = _cut_id(table, n_lattice, plus[i], minus[0])
-        choice = 0
-        for i in range(3):
-            j = (i + 1) % 3
-            if not _quad_first_diagonal(coords, pv[i], pv[j], minus[0]):
-                choice |= 1 << i
-    if prism[choice, 0, 0] < 0:
+    choice = _prism_choice(coords, plus, minus, n_p, prism)
+    if choice < 0:
         return -1
     for i in range(3):
         _emit(out, k + i, pv[prism[choice, i, 0]], pv[prism[choice, i, 1]], pv[prism[choice, i, 2]], pv[prism[choice, i, 3]])

@@ -1,0 +1,191 @@
+"""Isosurface stuffing on its own: lattices and graded octrees cut by planes.
+
+A plane cuts every tet exactly where linear interpolation says, so the stuffed volume must
+equal the clipped volume exactly, whatever the tets are: fat lattice tets, coarse ones or
+transition templates.  On the uniform lattice the warps and stencils must also keep
+Labelle & Shewchuk's dihedral bound.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from paroct import lattice
+from paroct.frame import LATTICE_TO_SPACE
+from paroct.quality import tet_quality
+from paroct.stuffing import (
+    ALPHA_LONG,
+    ALPHA_SHORT,
+    CutEdges,
+    _warp,
+    collect_cut_edges,
+    mixed_tets,
+    stuff,
+)
+from paroct.topology import match_faces
+
+from .test_grading import _random_balanced_tree
+
+#: Labelle & Shewchuk's bound for the BCC lattice, degrees.
+LS_MIN, LS_MAX = 10.7, 164.8
+
+
+def _clipped_volume(points, tets, phi):
+    """Volume of {phi > 0} in each tet for a linear phi (values at the vertices, distinct in a
+    tet): V * sum over positive i of phi_i^3 / prod_{j != i} (phi_i - phi_j) (the divided
+    difference of the truncated cube)."""
+    p = points[tets]
+    vol = np.abs(np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])) / 6
+    f = phi[tets]
+    frac = np.zeros(tets.shape[0])
+    for i in range(4):
+        den = np.ones(tets.shape[0])
+        for j in range(4):
+            if j != i:
+                den *= f[:, i] - f[:, j]
+        frac += np.where(f[:, i] > 0, f[:, i] ** 3 / den, 0.0)
+    return float((vol * frac).sum())
+
+
+def _stuff(coords, tets, phi, fracs_of, warp):
+    """Stuff the tets (lattice coords (V, 3), tets (M, 4)) against the level set phi (V,) > 0,
+    the cut of edge (start, end) at fracs_of(x, starts, ends); warps by the Labelle-Shewchuk
+    rule with each edge's own length (alpha_long for lattice-long directions at any spacing,
+    alpha_short for the rest), never for vertices on the hull of coords.  Returns (lattice
+    points in space, output points, output tets)."""
+    x = coords @ LATTICE_TO_SPACE.T
+    inside = phi > 0
+    starts, ends, _, *table = collect_cut_edges(mixed_tets(tets, inside), inside, coords)
+    fracs = fracs_of(x, starts, ends)
+    cut_points = x[starts] + fracs[:, None] * (x[ends] - x[starts])
+    cuts = CutEdges(starts, ends, np.full(starts.shape[0], -1), fracs, cut_points, tuple(table))
+    targets = np.full(coords.shape[0], -1, dtype=np.int64)
+    if warp:
+        d = coords[ends] - coords[starts]
+        long = np.count_nonzero(d, axis=1) == 2
+        long &= (np.abs(d) == np.abs(d).max(axis=1)[:, None]) .sum(axis=1) == 2
+        lengths = np.linalg.norm(x[ends] - x[starts], axis=1)
+        targets = _warp(coords.shape[0], starts, ends, fracs, lengths, np.where(long, ALPHA_LONG, ALPHA_SHORT))
+        targets[((coords == coords.min(axis=0)) | (coords == coords.max(axis=0))).any(axis=1)] = -1
+    points, out = stuff(x, coords, tets, inside, cuts, targets)
+    return x, points, out
+
+
+def _plane(coords, normal, offset):
+    """phi and exact cut fractions of the plane normal . x = offset."""
+    phi = coords @ LATTICE_TO_SPACE.T @ normal - offset
+    return phi, lambda x, s, e: phi[s] / (phi[s] - phi[e])
+
+
+def _sphere(coords, centre, radius):
+    """phi = radius - |x - centre| and the exact cut fractions (the root of a quadratic)."""
+    x = coords @ LATTICE_TO_SPACE.T
+    phi = radius - np.linalg.norm(x - centre, axis=1)
+
+    def fracs(x, s, e):
+        d = x[e] - x[s]
+        m = x[s] - centre
+        a, b, c = (d * d).sum(axis=1), 2 * (m * d).sum(axis=1), (m * m).sum(axis=1) - radius**2
+        root = np.sqrt(b * b - 4 * a * c)
+        t1, t2 = (-b - root) / (2 * a), (-b + root) / (2 * a)
+        return np.where((t1 >= 0) & (t1 <= 1), t1, t2)
+
+    return phi, fracs
+
+
+def _boundary_triangles(points, out):
+    """Space triangles (K, 3, 3) of the faces of out that only one tet has."""
+    neighbour, overloaded, same_side = match_faces(out)
+    assert overloaded == 0 and same_side == 0
+    t, f = np.nonzero(neighbour < 0)
+    opposite = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    return points[out[t[:, None], opposite[f]]]
+
+
+def _on_hull(tri_points, coords):
+    """Triangles (K, 3, 3) in space lying on a face of the box of the lattice coords (V, 3)."""
+    u = tri_points @ np.linalg.inv(LATTICE_TO_SPACE).T
+    out = np.zeros(tri_points.shape[0], dtype=bool)
+    for i in range(3):
+        for bound in (coords[:, i].min(), coords[:, i].max()):
+            out |= (np.abs(u[:, :, i] - bound) < 1e-9).all(axis=1)
+    return out
+
+
+def _check_plane_cut(coords, tets, normal, offset, warp):
+    """Stuff against a plane and check: positive tets, every interior face shared by two tets
+    on opposite sides, boundary faces on the plane or the box, volume the clipped volume."""
+    phi, fracs = _plane(coords, normal, offset)
+    x, points, out = _stuff(coords, tets, phi, fracs, warp)
+    q = tet_quality(points, out)
+    assert np.all(q.volume > 0)
+    tri = _boundary_triangles(points, out)
+    on_plane = (np.abs(tri @ normal - offset) < 1e-9).all(axis=1)
+    assert np.all(on_plane | _on_hull(tri, coords))
+    assert q.volume.sum() == pytest.approx(_clipped_volume(x, tets, phi), rel=1e-9)
+
+
+def _random_plane(rng, coords):
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    x = coords @ LATTICE_TO_SPACE.T
+    return normal, float(rng.uniform(*np.quantile(x @ normal, [0.2, 0.8])))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_uniform_lattice_keeps_the_labelle_shewchuk_bound(seed):
+    """Spheres inside a uniform lattice block: the warps and stencils keep every dihedral
+    angle in [10.7, 164.8] degrees (Labelle & Shewchuk, Theorem 1) and the boundary closed
+    and on the sphere."""
+    rng = np.random.default_rng(seed)
+    n = 10
+    anchors = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    coords, tets = lattice.leaf_tets(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    x = coords @ LATTICE_TO_SPACE.T
+    middle = x.mean(axis=0)
+    for _ in range(40):
+        centre = middle + rng.uniform(-0.5, 0.5, size=3)
+        radius = rng.uniform(1.0, 2.5)
+        phi, fracs = _sphere(coords, centre, radius)
+        _, points, out = _stuff(coords, tets, phi, fracs, warp=True)
+        q = tet_quality(points, out)
+        assert np.all(q.volume > 0)
+        assert LS_MIN <= q.min_dihedral.min() and q.max_dihedral.max() <= LS_MAX
+        tri = _boundary_triangles(points, out)
+        assert np.allclose(np.linalg.norm(tri - centre, axis=2), radius)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_graded_octrees_stuff_conforming_with_the_clipped_volume(seed):
+    """Coarse fat tets and transition templates are cut too: faces off the finest lattice take
+    the rule of the lattice they lie in, or the quad diagonal at the smaller vertex id.  (No
+    warps: the warp rule is proven for one lattice only, and warps along template edges can
+    invert tets.)"""
+    rng = np.random.default_rng(1000 + seed)
+    anchors, sides = _random_balanced_tree(seed, 3 + seed % 2)
+    coords, tets = lattice.leaf_tets(anchors, sides)
+    for _ in range(20):
+        normal, offset = _random_plane(rng, coords)
+        _check_plane_cut(coords, tets, normal, offset, warp=False)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_quad_rules_never_cycle_on_lattice_and_template_tets(seed):
+    """Every tet of a random balanced octree with every one of its vertices outside (a +++-
+    prism, whose three quads all lie on faces of the tet): the face rules never cycle, so
+    three tets always fill the prism.  Each case gets its own copy of the tet's vertices,
+    numbered in the original order (the rule off the lattices compares vertex ids)."""
+    anchors, sides = _random_balanced_tree(seed, 3 + seed % 3)
+    coords, tets = lattice.leaf_tets(anchors, sides)
+    n = tets.shape[0]
+    rank = np.empty(4 * n, dtype=np.int64)
+    rank[np.argsort(tets.ravel(), kind="stable")] = np.arange(4 * n)
+    copies = rank.reshape(n, 4)
+    copy_coords = np.empty((4 * n, 3), dtype=np.int64)
+    copy_coords[copies] = coords[tets]
+    for outside in range(4):
+        phi = np.ones(4 * n)
+        phi[copies[:, outside]] = -1.0
+        x, points, out = _stuff(copy_coords, copies, phi, lambda x, s, e: np.full(s.shape[0], 0.5), warp=False)
+        assert out.shape[0] == 3 * n
