@@ -14,15 +14,7 @@ import pytest
 from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.quality import tet_quality
-from paroct.stuffing import (
-    ALPHA_LONG,
-    ALPHA_SHORT,
-    CutEdges,
-    _warp,
-    collect_cut_edges,
-    mixed_tets,
-    stuff,
-)
+from paroct.stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
 from paroct.topology import match_faces
 
 from .test_grading import _random_balanced_tree
@@ -48,11 +40,10 @@ def _clipped_volume(points, tets, phi):
     return float((vol * frac).sum())
 
 
-def _stuff(coords, tets, phi, fracs_of, warp):
+def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
     """Stuff the tets (lattice coords (V, 3), tets (M, 4)) against the level set phi (V,) > 0,
-    the cut of edge (start, end) at fracs_of(x, starts, ends); warps by the Labelle-Shewchuk
-    rule with each edge's own length (alpha_long for lattice-long directions at any spacing,
-    alpha_short for the rest), never for vertices on the hull of coords.  Returns (lattice
+    the cut of edge (start, end) at fracs_of(x, starts, ends); warps by warp_targets (spacing:
+    each vertex's finest leaf side, default 1), never for vertices on the hull of coords.  Returns (lattice
     points in space, output points, output tets)."""
     x = coords @ LATTICE_TO_SPACE.T
     inside = phi > 0
@@ -62,11 +53,7 @@ def _stuff(coords, tets, phi, fracs_of, warp):
     cuts = CutEdges(starts, ends, np.full(starts.shape[0], -1), fracs, cut_points, tuple(table))
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     if warp:
-        d = coords[ends] - coords[starts]
-        long = np.count_nonzero(d, axis=1) == 2
-        long &= (np.abs(d) == np.abs(d).max(axis=1)[:, None]) .sum(axis=1) == 2
-        lengths = np.linalg.norm(x[ends] - x[starts], axis=1)
-        targets = _warp(coords.shape[0], starts, ends, fracs, lengths, np.where(long, ALPHA_LONG, ALPHA_SHORT))
+        targets = warp_targets(cuts, coords, 1.0, spacing)
         targets[((coords == coords.min(axis=0)) | (coords == coords.max(axis=0))).any(axis=1)] = -1
     points, out = stuff(x, coords, tets, inside, cuts, targets)
     return x, points, out
@@ -113,11 +100,11 @@ def _on_hull(tri_points, coords):
     return out
 
 
-def _check_plane_cut(coords, tets, normal, offset, warp):
+def _check_plane_cut(coords, tets, normal, offset, warp, spacing=None):
     """Stuff against a plane and check: positive tets, every interior face shared by two tets
     on opposite sides, boundary faces on the plane or the box, volume the clipped volume."""
     phi, fracs = _plane(coords, normal, offset)
-    x, points, out = _stuff(coords, tets, phi, fracs, warp)
+    x, points, out = _stuff(coords, tets, phi, fracs, warp, spacing)
     q = tet_quality(points, out)
     assert np.all(q.volume > 0)
     tri = _boundary_triangles(points, out)
@@ -157,35 +144,26 @@ def test_uniform_lattice_keeps_the_labelle_shewchuk_bound(seed):
 
 
 @pytest.mark.parametrize("seed", range(12))
-def test_graded_octrees_stuff_conforming_with_the_clipped_volume(seed):
+@pytest.mark.parametrize("warp", [False, True])
+def test_graded_octrees_stuff_conforming_with_the_clipped_volume(seed, warp):
     """Coarse fat tets and transition templates are cut too: faces off the finest lattice take
-    the rule of the lattice they lie in, or the quad diagonal at the smaller vertex id.  (No
-    warps: the warp rule is proven for one lattice only, and warps along template edges can
-    invert tets.)"""
+    the rule of the lattice they lie in, or the quad diagonal at the smaller vertex id.  With
+    warps (warp_targets' rule for template edges and vertices shared with finer leaves; no
+    angle bound is proven there, docs/thin_study measures it) every tet stays positive."""
     rng = np.random.default_rng(1000 + seed)
     anchors, sides = _random_balanced_tree(seed, 3 + seed % 2)
-    coords, tets = lattice.leaf_tets(anchors, sides)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
+    spacing = lattice.vertex_spacing(vertices, sides)
     for _ in range(20):
         normal, offset = _random_plane(rng, coords)
-        _check_plane_cut(coords, tets, normal, offset, warp=False)
+        _check_plane_cut(coords, tets, normal, offset, warp, spacing)
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_quad_rules_never_cycle_on_lattice_and_template_tets(seed):
-    """Every tet of a random balanced octree with every one of its vertices outside (a +++-
-    prism, whose three quads all lie on faces of the tet): the face rules never cycle, so
-    three tets always fill the prism.  Each case gets its own copy of the tet's vertices,
-    numbered in the original order (the rule off the lattices compares vertex ids)."""
-    anchors, sides = _random_balanced_tree(seed, 3 + seed % 3)
-    coords, tets = lattice.leaf_tets(anchors, sides)
-    n = tets.shape[0]
-    rank = np.empty(4 * n, dtype=np.int64)
-    rank[np.argsort(tets.ravel(), kind="stable")] = np.arange(4 * n)
-    copies = rank.reshape(n, 4)
-    copy_coords = np.empty((4 * n, 3), dtype=np.int64)
-    copy_coords[copies] = coords[tets]
-    for outside in range(4):
-        phi = np.ones(4 * n)
-        phi[copies[:, outside]] = -1.0
-        x, points, out = _stuff(copy_coords, copies, phi, lambda x, s, e: np.full(s.shape[0], 0.5), warp=False)
-        assert out.shape[0] == 3 * n
+def test_vertex_spacing_is_the_finest_leaf_side_at_each_vertex():
+    for seed in range(4):
+        anchors, sides = _random_balanced_tree(seed, 4)
+        vertices = lattice.number_vertices(anchors, sides)
+        spacing = lattice.vertex_spacing(vertices, sides)
+        holds = [(np.all(anchors <= c, axis=1) & np.all(c <= anchors + sides[:, None], axis=1)) for c in vertices.coords]
+        assert np.array_equal(spacing, [sides[h].min() for h in holds])

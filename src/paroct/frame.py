@@ -31,8 +31,6 @@ ROTATION = LATTICE_TO_SPACE @ np.linalg.inv(TODD_A)
 EDGE_DIRECTIONS = np.array(
     [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1]], dtype=np.int64
 )
-#: True for the three long directions (e_i + e_j, length h), False for the short ones.
-EDGE_IS_LONG = np.array([False, False, False, True, True, True, False])
 #: Index into EDGE_DIRECTIONS of the direction that maps to the +x axis.
 X_AXIS_DIRECTION = 3
 

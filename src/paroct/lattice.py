@@ -362,6 +362,33 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, SPLIT_POINT_OFFSETS, FACE_EDGES))
 
 
+def vertex_spacing(vertices: LeafVertices, sides: np.ndarray) -> np.ndarray:
+    """Side (V,) int64 of the finest leaf whose closure holds each vertex (sides: (L,) of the
+    leaves numbered by number_vertices): the smallest side of the leaves having it as a corner;
+    for an eager face centre, which is no leaf's corner, the side of the leaves sharing that
+    face.  Stuffing caps the warps of vertices shared with finer leaves by it."""
+    return _vertex_spacing(vertices.corner_ids, vertices.split_row, vertices.split_ids,
+                           np.ascontiguousarray(sides, dtype=np.int64), vertices.coords.shape[0])
+
+
+@nb.njit(cache=True)
+def _vertex_spacing(corner_ids, split_row, split_ids, sides, n_vertices):
+    unset = np.iinfo(np.int64).max
+    spacing = np.full(n_vertices, unset, dtype=np.int64)
+    for i in range(corner_ids.shape[0]):
+        for c in range(8):
+            v = corner_ids[i, c]
+            spacing[v] = min(spacing[v], sides[i])
+    for i in range(corner_ids.shape[0]):
+        r = split_row[i]
+        if r >= 0:
+            for p in range(split_ids.shape[1]):
+                v = split_ids[r, p]
+                if v >= 0 and spacing[v] == unset:
+                    spacing[v] = sides[i]
+    return spacing
+
+
 def graded_tets(vertices: LeafVertices, marked: np.ndarray | None = None) -> np.ndarray:
     """The positively oriented tets (int32, 4 columns) of the leaves, in leaf order.
 

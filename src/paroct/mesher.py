@@ -379,7 +379,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
     cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings, report)
-    targets = warp_targets(cuts, cut_cells.coords.shape[0], frame.h)
+    targets = warp_targets(cuts, cut_cells.coords, frame.h)
     warped = cut_cells.coords[targets >= 0]
     around = (warped[:, None, :] - CUBE_CORNERS[None, :, :]).reshape(-1, 3)  # the 8 cells at each warped vertex
     around = around[(around >= 0).all(axis=1)]
