@@ -196,8 +196,8 @@ def _edge_reach(coords, starts, ends, spacing, to_space, alpha_long, alpha_short
 
 @dataclass(frozen=True)
 class CutEdges:
-    """Lattice edges whose ends differ in class.  starts, ends: (E,) vertex ids with
-    end - start = side * EDGE_DIRECTIONS[directions]; fracs: (E,) cut position from
+    """Tet edges whose ends differ in class.  starts, ends: (E,) vertex ids; directions: (E,)
+    as collect_cut_edges gives them (-1 off the unit lattice edges); fracs: (E,) cut position from
     start, in [0, 1]; points: (E, 3) space positions of the cut points; table: the lookup
     of collect_cut_edges (first, last, partner, edge) finding an edge from its two ends."""
 
