@@ -27,8 +27,7 @@ def _clipped_volume(points, tets, phi):
     """Volume of {phi > 0} in each tet for a linear phi (values at the vertices, distinct in a
     tet): V * sum over positive i of phi_i^3 / prod_{j != i} (phi_i - phi_j) (the divided
     difference of the truncated cube)."""
-    p = points[tets]
-    vol = np.abs(np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])) / 6
+    vol = np.abs(tet_quality(points, tets).volume)
     f = phi[tets]
     frac = np.zeros(tets.shape[0])
     for i in range(4):
@@ -43,8 +42,8 @@ def _clipped_volume(points, tets, phi):
 def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
     """Stuff the tets (lattice coords (V, 3), tets (M, 4)) against the level set phi (V,) > 0,
     the cut of edge (start, end) at fracs_of(x, starts, ends); warps by warp_targets (spacing:
-    each vertex's finest leaf side, default 1), never for vertices on the hull of coords.  Returns (lattice
-    points in space, output points, output tets)."""
+    each vertex's finest leaf side, default 1), never for vertices on the hull of coords.
+    Returns (lattice points in space, output points, output tets)."""
     x = coords @ LATTICE_TO_SPACE.T
     inside = phi > 0
     starts, ends, _, *table = collect_cut_edges(mixed_tets(tets, inside), inside, coords)
@@ -167,3 +166,24 @@ def test_vertex_spacing_is_the_finest_leaf_side_at_each_vertex():
         spacing = lattice.vertex_spacing(vertices, sides)
         holds = [(np.all(anchors <= c, axis=1) & np.all(c <= anchors + sides[:, None], axis=1)) for c in vertices.coords]
         assert np.array_equal(spacing, [sides[h].min() for h in holds])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_quad_rules_never_cycle_on_lattice_and_template_tets(seed):
+    """Every tet of a random balanced octree with every one of its vertices outside (a +++-
+    prism, whose three quads all lie on faces of the tet): the face rules never cycle, so
+    three tets always fill the prism.  Each case gets its own copy of the tet's vertices,
+    numbered in the original order (the rule off the lattices compares vertex ids)."""
+    anchors, sides = _random_balanced_tree(seed, 3 + seed % 3)
+    coords, tets = lattice.leaf_tets(anchors, sides)
+    n = tets.shape[0]
+    rank = np.empty(4 * n, dtype=np.int64)
+    rank[np.argsort(tets.ravel(), kind="stable")] = np.arange(4 * n)
+    copies = rank.reshape(n, 4)
+    copy_coords = np.empty((4 * n, 3), dtype=np.int64)
+    copy_coords[copies] = coords[tets]
+    for outside in range(4):
+        phi = np.ones(4 * n)
+        phi[copies[:, outside]] = -1.0
+        x, points, out = _stuff(copy_coords, copies, phi, lambda x, s, e: np.full(s.shape[0], 0.5), warp=False)
+        assert out.shape[0] == 3 * n
