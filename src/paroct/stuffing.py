@@ -177,11 +177,10 @@ def _edge_reach(coords, starts, ends, spacing, to_space, alpha_long, alpha_short
             x = to_space[i, 0] * d0 + to_space[i, 1] * d1 + to_space[i, 2] * d2
             length += x * x
         lengths[e] = np.sqrt(length)
-        m = max(abs(d0), abs(d1), abs(d2))
-        if _lattice_step(d0, d1, d2, m):
+        scale = _edge_spacing(coords, starts[e], ends[e])
+        if scale > 0:
             long = (d0 != 0) + (d1 != 0) + (d2 != 0) == 2
             alpha = alpha_long if long else alpha_short
-            scale = m
         else:  # a template edge off the lattices, in a leaf of side 2 g (g: gcd of |d|)
             alpha = alpha_long
             g = abs(d0)
@@ -287,23 +286,28 @@ def _lattice_step(dx, dy, dz, s):
 
 
 @nb.njit(cache=True, inline="always")
+def _edge_spacing(coords, a, b):
+    """s > 0 if the segment ab is an edge of the Freudenthal lattice of spacing s (b - a is
+    +-s times a direction of {0, 1}^3), else 0."""
+    dx = coords[b, 0] - coords[a, 0]
+    dy = coords[b, 1] - coords[a, 1]
+    dz = coords[b, 2] - coords[a, 2]
+    s = max(abs(dx), abs(dy), abs(dz))
+    return s if _lattice_step(dx, dy, dz, s) else 0
+
+
+@nb.njit(cache=True, inline="always")
 def _face_spacing(coords, a, b, e):
     """The spacing s (a power of two) of the lattice whose Freudenthal triangulation has the
     triangle (a, b, e) as a face: its corners are multiples of s and its three edges are
     lattice edges of spacing s; 0 if there is none (a face of a transition template that
     crosses the lattices, such as corner, corner, face centre of a coarse leaf)."""
-    s = max(abs(coords[b, 0] - coords[a, 0]), abs(coords[b, 1] - coords[a, 1]), abs(coords[b, 2] - coords[a, 2]))
-    if s == 0 or (s & (s - 1)) != 0:
+    s = _edge_spacing(coords, a, b)
+    if s == 0 or (s & (s - 1)) != 0 or _edge_spacing(coords, a, e) != s or _edge_spacing(coords, b, e) != s:
         return 0
     for i in range(3):
         if coords[a, i] % s != 0:
             return 0
-    if not _lattice_step(coords[b, 0] - coords[a, 0], coords[b, 1] - coords[a, 1], coords[b, 2] - coords[a, 2], s):
-        return 0
-    if not _lattice_step(coords[e, 0] - coords[a, 0], coords[e, 1] - coords[a, 1], coords[e, 2] - coords[a, 2], s):
-        return 0
-    if not _lattice_step(coords[e, 0] - coords[b, 0], coords[e, 1] - coords[b, 1], coords[e, 2] - coords[b, 2], s):
-        return 0
     return s
 
 
