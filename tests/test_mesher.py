@@ -147,6 +147,9 @@ def test_thin_walls_refine_the_boundary_until_two_layers_span_them():
     _assert_valid(result.mesh.points, result.mesh.tets, surface)
     # The interior still coarsens (towards max_size = 8 x the requested size).
     assert rep.max_size == pytest.approx(0.8) and max(rep.leaf_levels) >= 3  # 0.1 and coarser inside
+    # Only the fin's band is fine: the block keeps the requested size along its boundary.
+    everywhere = mesh(surface, size=0.0125, max_size=0.8, thin_features=False)
+    assert rep.n_tets < 0.5 * everywhere.report.n_tets
 
 
 def test_min_size_floor_is_reported_in_one_line():

@@ -18,13 +18,15 @@ from .errors import ParoctError
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
-from .lattice import LeafVertices, graded_tets, number_vertices
+from .band import BandLevels, band_cells, band_levels, local_leaves, merge_band_levels, no_band_levels
+from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, morton_keys, sorted_unique
-from .octree import balance, octant_lattice_anchors, octants_holding, octants_within, surface_cells
-from .quality import summarize
+from .octree import (FaceBuckets, balance, face_buckets, octant_lattice_anchors, octants_holding, octants_within,
+                     surface_cells)
+from .quality import summarize, tet_quality
 from .repair import remove_pinches
 from .sizing import OUTSIDE, UNDECIDED, WHOLLY_INSIDE, Region, SizeField, SizeFunction, size_field, size_seeds
-from .stuffing import CutEdges, collect_cut_edges, mixed_rows, mixed_tets, stuff, warp_targets
+from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
@@ -86,6 +88,7 @@ class MeshReport:
     boundary_manifold: bool = True
     unresolved_cuts: int = 0
     repaired_tets: int = 0
+    bad_tets: int = 0
     stage_seconds: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     notes: list = field(default_factory=list)
@@ -200,7 +203,15 @@ def mesh(
         report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
                             input_genus=surface.genus, input_components=surface.components, stage_seconds=stage_seconds)
         attempt = _at_boundary_size(field, band)
-        result, lost, advice, finer = _mesh_at(surface, attempt, report, progress)
+        result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
+        if thin_features and lost and band == h and walls is not None:
+            local = _thin_locally(surface, field, walls, floor, budget, lost, progress, stage_seconds)
+            if local is not None:
+                return local
+        finer = band
+        if walls is not None and walls.thickness.size:
+            while finer > walls.thickness.min() / 2:
+                finer /= 2
         finer = max(min(finer, band / 2), floor)
         while finer < band * (1 - 1e-9) and not _fits(surface, field, finer, budget):
             finer, memory_bound = finer * 2, True
@@ -221,11 +232,63 @@ def mesh(
     return result
 
 
+def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
+                  progress: Callable[[str], None] | None, stage_seconds: dict) -> MeshResult | None:
+    """Refine the band only near the thin walls and gaps (two element layers across each,
+    down to ``floor``), measure and refine until every tet is within DIHEDRAL_BOUND, and one
+    level more while the mesh still loses topology or volume.  None if that does not succeed
+    (no thin place found, the floor or the memory budget reached, or tets still outside the
+    bound): then the caller refines the whole band."""
+    coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
+    max_depth = int(np.floor(np.log2(field.size / floor) + 1e-9))
+    notes = [f"at boundary size {field.size:.4g} {lost}"]
+    for extra in range(max_depth):
+        points, depth = _thin_asks(coarse, walls, max_depth, extra)
+        if depth.size == 0:
+            return None
+        frame = _refined_frame(coarse, int(depth.max()))
+        if frame.levels > MAX_FRAME_LEVELS:
+            return None
+        wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
+        for rounds in range(1, MAX_REFINE_ROUNDS + 1):
+            if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
+                return None
+            report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
+                                solid_volume=surface.volume, input_genus=surface.genus,
+                                input_components=surface.components, stage_seconds=stage_seconds)
+            result, asks = _mesh_locally(surface, field, frame, coarse.levels, wanted, report, progress)
+            merged = merge_band_levels(wanted, asks)
+            if result is not None or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
+                break
+            wanted = merged
+        if result is None:
+            return None
+        thinnest = int(np.argmin(walls.thickness))
+        notes.append(f"boundary refined to {frame.h:.4g} only near the {depth.size} samples of walls and gaps thinner "
+                     f"than 2 x size (thinnest {'wall' if walls.is_wall[thinnest] else 'gap'} "
+                     f"{walls.thickness[thinnest]:.4g}), in {rounds} measure-and-refine round{'s' * (rounds > 1)}")
+        still = _losses(report)
+        if not still:
+            report.notes = notes
+            return result
+        notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
+        if depth.min() >= max_depth:
+            return None
+    return None
+
+
 #: Default min_size: size divided by this.
 DEFAULT_MIN_SIZE_DIVISOR = 8
 #: Refine for walls and gaps whose two sides face each other this squarely (unit normals' dot
 #: product below it, about 25 degrees): knife edges and wedge tips are not walls.
 THIN_FACING = -0.9
+
+
+def _local_tets(surface: Surface, field: SizeField, wanted: BandLevels) -> int:
+    """estimate_tets plus, for each coarse cell asked d levels finer, a band of BAND_CELLS
+    fine cells (six tets each) across the 4**d fine cells its surface meets."""
+    depth = wanted.levels.astype(np.int64) - wanted.coarse_level
+    return estimate_tets(surface, field) + int(6 * BAND_CELLS * np.sum(4.0**depth))
 
 
 def _check_memory(surface: Surface, field: SizeField, budget: int) -> None:
@@ -247,10 +310,10 @@ def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
 
 
 def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
-             progress: Callable[[str], None] | None) -> tuple[MeshResult, str, str, float]:
+             progress: Callable[[str], None] | None) -> tuple[MeshResult, str, str, ThinFeatures | None]:
     """One meshing pass at the field's boundary size: (result, what the mesh lost or '', advice,
-    a boundary size h / 2**k giving two element layers across the thinnest wall or gap whose
-    sides face each other squarely (h if none or nothing lost))."""
+    the walls and gaps whose sides face each other squarely (THIN_FACING), found only if the
+    mesh lost something)."""
     stages = _Stages(report, progress)
     h = field.size
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
@@ -278,39 +341,49 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     tets = graded_tets(vertices, inside)  # tets with no inside vertex stay outside
     stages.done("emit")
 
-    cuts = band.cuts
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     targets[:n_band] = band.targets
-    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
-    stages.done("stuff")
-
-    core = np.zeros(points.shape[0], dtype=bool)
-    core[: coords.shape[0]] = inside & (targets < 0)
-    out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
-    stages.done("repair")
-
-    _measure(points, out_tets, core, faces_out, report)
-    points, out_tets = _compact(points, out_tets)
-    report.n_vertices = int(points.shape[0])
-    stages.done("quality")
-    if report.unresolved_cuts:
-        report.warnings.append(
-            f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
-            "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
-        )
+    points, out_tets = _stuff_and_measure(frame, coords, tets, inside, band.cuts, targets, report, stages)
+    result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
+    report.n_vertices = int(result.mesh.points.shape[0])
     lost = _losses(report)
-    advice, finer = "", h
+    advice, walls = "", None
     if lost:
         for d in range(EDGE_DIRECTIONS.shape[0]):
             if d not in crossings:
                 crossings[d] = rays.row_crossings(frame, snapped, faces, d)
         advice = _thin_feature_advice(find_thin_features(frame, crossings, surface.vertices, faces), h)
         walls = find_thin_features(frame, crossings, surface.vertices, faces, THIN_FACING)
-        if walls.thickness.size:
-            while finer > walls.thickness.min() / 2:
-                finer /= 2
         stages.done("features")
-    return MeshResult(TetMesh(points, out_tets), report), lost, advice, finer
+    return result, lost, advice, walls
+
+
+def _stuff_and_measure(frame: FatFrame, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
+                       targets: np.ndarray, report: MeshReport, stages: _Stages) -> tuple[np.ndarray, np.ndarray]:
+    """Stuff, repair pinches and fill the report's quality, volume and topology: the mesh
+    (points, tets) with points 0..V-1 the lattice vertices (coords (V, 3)), unused points kept."""
+    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
+    stages.done("stuff")
+    return _repair_and_measure(points, out_tets, inside, targets, report, stages)
+
+
+def _repair_and_measure(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
+                        report: MeshReport, stages: _Stages) -> tuple[np.ndarray, np.ndarray]:
+    """Repair pinches and fill the report's quality, volume and topology.  inside, targets
+    (V,): over the lattice vertices, points 0..V-1."""
+    core = np.zeros(points.shape[0], dtype=bool)
+    core[: inside.shape[0]] = inside & (targets < 0)
+    out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
+    stages.done("repair")
+
+    _measure(points, out_tets, core, faces_out, report)
+    stages.done("quality")
+    if report.unresolved_cuts:
+        report.warnings.append(
+            f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
+            "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
+        )
+    return points, out_tets
 
 
 #: Volume loss (relative) above which the mesh is said to have lost part of the solid.
@@ -342,6 +415,97 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
     if not found:
         return f"no wall or gap thinner than 2 x size = {2 * h:.4g} was found; try a smaller size"
     return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
+
+
+#: Rounds of measure-and-refine a locally refined band gets before paroct refines the whole
+#: band instead (each round refines the band around every tet outside DIHEDRAL_BOUND).
+MAX_REFINE_ROUNDS = 6
+
+
+def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
+    """The frame ``depth`` levels finer: same origin, so its lattice holds this one's."""
+    return FatFrame(origin=frame.origin, h=frame.h / 2**depth, levels=frame.levels + depth)
+
+
+def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lattice points (K, 3) of ``coarse`` and depths (K,) in levels below it: two element
+    layers across every wall or gap thinner than 2 h (one more level per ``extra``), at most
+    max_depth."""
+    thin = walls.thickness < 2 * coarse.h
+    depth = np.ceil(np.log2(2 * coarse.h / np.maximum(walls.thickness[thin], 1e-300)) - 1e-9).astype(np.int64)
+    depth = np.clip(depth + extra, 1, max_depth)
+    return coarse.to_lattice(walls.points[thin]), depth
+
+
+def _mesh_locally(surface: Surface, field: SizeField, frame: FatFrame, coarse_level: int, wanted: BandLevels,
+                  report: MeshReport, progress: Callable[[str], None] | None) -> tuple[MeshResult | None, BandLevels]:
+    """One pass with a band refined where ``wanted`` asks (frame: the finest frame, whose
+    level coarse_level has long edge field.size).  Returns the result, or None if a tet falls
+    outside stuffing.DIHEDRAL_BOUND, and then where the band must be finer."""
+    stages = _Stages(report, progress)
+    report.levels = frame.levels
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    bits = rays.snap_bits(frame)
+    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+    buckets = face_buckets(frame, snapped, faces, bits, coarse_level)
+    band_keys, band_levels_ = band_cells(frame, snapped, faces, bits, buckets, wanted)
+    keys, levels, in_band = local_leaves(frame, band_keys, band_levels_, buckets.keys, coarse_level,
+                                         crossings[X_AXIS_DIRECTION], surface.bbox_min - field.size,
+                                         surface.bbox_max + field.size, field)
+    report.n_leaves = int(keys.shape[0])
+    report.leaf_levels = tuple(int(v) for v in np.unique(frame.levels - levels))
+    stages.done("octree")
+
+    sides = np.int64(1) << (frame.levels - levels.astype(np.int64))
+    vertices = number_vertices(octant_lattice_anchors(keys, frame), sides)
+    coords = vertices.coords
+    inside = np.ones(coords.shape[0], dtype=bool)
+    ids = _band_vertex_ids(vertices, in_band)
+    inside[ids] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords[ids]) > 0
+    stages.done("classify")
+
+    tets = graded_tets(vertices, inside)
+    stages.done("emit")
+
+    cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report, buckets)
+    spacing = vertex_spacing(vertices, sides)
+    targets = warp_targets(cuts, coords, frame.h, spacing)
+    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
+    stages.done("stuff")
+
+    # Measured before the pinch repair, which needs a mesh that does not fold: a band that
+    # changes level may give tets outside the bound, and then this pass only says where.
+    quality = tet_quality(points, out_tets)
+    bad = np.nonzero((quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1]))[0]
+    report.bad_tets = int(bad.size)
+    asks = no_band_levels(coarse_level)
+    if bad.size:
+        # Refine the band around each bad tet to the finest level among its lattice vertices'
+        # leaves (one level more if they are all alike).
+        lattice = out_tets[bad].astype(np.int64)
+        is_lattice = lattice < coords.shape[0]
+        ends = np.where(is_lattice, lattice, 0)
+        side = np.where(is_lattice, spacing[ends], 0)
+        finest_side = np.where(is_lattice, spacing[ends], np.iinfo(np.int64).max).min(axis=1)
+        level = frame.levels - np.log2(finest_side).astype(np.int64)
+        level = np.where(finest_side == side.max(axis=1), level + 1, level)
+        level = np.minimum(level, frame.levels)
+        rows, cols = np.nonzero(is_lattice)
+        asks = band_levels(frame, coarse_level, coords[lattice[rows, cols]], level[rows])
+        stages.done("quality")
+        return None, asks
+    points, out_tets = _repair_and_measure(points, out_tets, inside, targets, report, stages)
+    result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
+    report.n_vertices = int(result.mesh.points.shape[0])
+    return result, asks
+
+
+def _band_vertex_ids(vertices: LeafVertices, in_band: np.ndarray) -> np.ndarray:
+    """Ids of the vertices of the band leaves (in_band (L,)): corners and split points."""
+    rows = vertices.split_row[in_band]
+    split = vertices.split_ids[rows[rows >= 0]].ravel()
+    return np.unique(np.concatenate([vertices.corner_ids[in_band].ravel(), split[split >= 0]]))
 
 
 @dataclass(frozen=True)
@@ -458,11 +622,22 @@ def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices,
                         np.zeros((0, 18), dtype=np.int32), vertices.coords[kept]), kept
 
 
-def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport) -> CutEdges:
-    """Cut points of every lattice edge of the tets whose ends differ in class."""
+def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport,
+              buckets: FaceBuckets | None = None) -> CutEdges:
+    """Cut points of every edge of the tets whose ends differ in class: unit lattice edges
+    along their rows, others (coarse lattice edges, template edges) against the triangles of
+    ``buckets`` (needed only if there are such edges)."""
     mixed = mixed_tets(np.ascontiguousarray(tets), inside)
     starts, ends, dirs, *table = collect_cut_edges(mixed, inside, coords)
     fracs = np.empty(starts.shape[0])
+    other = np.nonzero(dirs < 0)[0]
+    if other.size:
+        if buckets is None:
+            raise ValueError(f"{other.size} cut edges are not unit lattice edges: cut_edges needs face buckets")
+        f, unresolved = rays.segment_cut_fractions(buckets, frame, snapped, faces, coords, starts[other], ends[other],
+                                                   inside[starts[other]])
+        fracs[other] = f
+        report.unresolved_cuts += int(unresolved.sum())
     for d in range(EDGE_DIRECTIONS.shape[0]):
         sel = np.nonzero(dirs == d)[0]
         if sel.size == 0:

@@ -9,6 +9,8 @@ Sci. Comput. 30 (2008).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba as nb
 import numpy as np
 
@@ -216,11 +218,13 @@ def triangle_meets_cube(tri, lo, side):
 @nb.njit(cache=True)
 def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
     """Morton keys (octree coordinates at lattice resolution) of the cells of side
-    2**cell_bits lattice units that each triangle meets, with repeats."""
+    2**cell_bits lattice units that each triangle meets, with repeats, and the index into
+    faces of the triangle that listed each."""
     unit = float(np.int64(1) << snap_bits)
     side = float(np.int64(1) << cell_bits)
     margin = 1e-7 * side
     out = np.empty(4 * faces.shape[0] + 16, dtype=np.int64)
+    out_faces = np.empty(out.shape[0], dtype=np.int64)
     m = 0
     tri = np.empty((3, 3))
     lo = np.empty(3)
@@ -274,9 +278,11 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
                         continue
                     if m == out.shape[0]:
                         out = np.concatenate((out, np.empty(m, dtype=np.int64)))
+                        out_faces = np.concatenate((out_faces, np.empty(m, dtype=np.int64)))
                     out[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
+                    out_faces[m] = f
                     m += 1
-    return out[:m].copy()
+    return out[:m].copy(), out_faces[:m].copy()
 
 
 def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> np.ndarray:
@@ -286,8 +292,32 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     relative margin of 1e-7 of the cell side, on the side of listing more cells: an octant not
     listed contains no surface point, so all its points have one inside/outside class.
     """
-    keys = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
+    keys, _ = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
     return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+
+
+@dataclass(frozen=True)
+class FaceBuckets:
+    """The triangles meeting each surface cell of one level: keys (K,) sorted octree keys of
+    the cells (surface_cells), faces[offsets[k]:offsets[k + 1]] the indices (into the faces
+    array) of the triangles meeting cell k, in increasing order."""
+
+    level: int
+    keys: np.ndarray
+    offsets: np.ndarray
+    faces: np.ndarray
+
+
+def face_buckets(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> FaceBuckets:
+    """surface_cells of ``level`` with the triangles that meet each (same margin)."""
+    keys, face_ids = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
+    order = np.argsort(keys, kind="stable")  # faces were listed in increasing order
+    keys, face_ids = keys[order], face_ids[order]
+    first = np.ones(keys.shape[0], dtype=bool)
+    first[1:] = keys[1:] != keys[:-1]
+    starts = np.nonzero(first)[0]
+    offsets = np.append(starts, keys.shape[0]).astype(np.int64)
+    return FaceBuckets(level, keys[starts] << (3 * (MAX_LEVEL - frame.levels)), offsets, face_ids)
 
 
 @nb.njit(cache=True)

@@ -30,6 +30,8 @@ import numba as nb
 import numpy as np
 
 from .frame import FatFrame, row_basis
+from .octant import MAX_LEVEL, morton_key
+from .octree import FaceBuckets
 
 #: Snapped coordinates, and their images under the row bases, stay below 2**(COORD_BITS + 1)
 #: in magnitude; orientations then fit in int64 and positions in the 128-bit helper.
@@ -368,4 +370,89 @@ def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray, start_inside
     status = np.empty(starts.shape[0], dtype=np.int8)
     _edge_cuts(crossings.keys, crossings.fracs, row_basis(crossings.direction), starts,
                np.ascontiguousarray(start_inside, dtype=np.bool_), out, status)
+    return out, status
+
+
+@nb.njit(cache=True, inline="always")
+def _orient3d(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
+    """Six times the signed volume of (a, b, c, d), in floats."""
+    bx, by, bz = bx - ax, by - ay, bz - az
+    cx, cy, cz = cx - ax, cy - ay, cz - az
+    dx, dy, dz = dx - ax, dy - ay, dz - az
+    return bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx)
+
+
+@nb.njit(cache=True)
+def _segment_hit(a, b, tri):
+    """Parameter t in [0, 1] where the segment a + t (b - a) crosses the triangle tri (3, 3),
+    or -1.0 if it does not (floats; a hit through an edge of the triangle may be missed or
+    found twice, which only changes which crossing is chosen)."""
+    d0 = _orient3d(a[0], a[1], a[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    d1 = _orient3d(b[0], b[1], b[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    if (d0 > 0 and d1 > 0) or (d0 < 0 and d1 < 0) or d0 == d1:
+        return -1.0
+    s = np.empty(3)
+    for k in range(3):
+        p, q = tri[k], tri[(k + 1) % 3]
+        s[k] = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], p[0], p[1], p[2], q[0], q[1], q[2])
+    if not ((s[0] >= 0 and s[1] >= 0 and s[2] >= 0) or (s[0] <= 0 and s[1] <= 0 and s[2] <= 0)):
+        return -1.0
+    return min(max(d0 / (d0 - d1), 0.0), 1.0)
+
+
+@nb.njit(cache=True, parallel=True)
+def _segment_cuts(bucket_keys, offsets, bucket_faces, snapped, faces, unit, coords, starts, ends, start_inside,
+                  cell_bits, key_shift, out, status):
+    for e in nb.prange(starts.shape[0]):
+        a = np.empty(3)
+        b = np.empty(3)
+        tri = np.empty((3, 3))
+        cell = np.empty(3, dtype=np.int64)
+        for i in range(3):
+            a[i] = coords[starts[e], i]
+            b[i] = coords[ends[e], i]
+            # The cell holding the midpoint holds the whole edge: edges lie in one leaf of
+            # this level or finer.  On a cell face either neighbour's bucket has the faces.
+            cell[i] = ((coords[starts[e], i] + coords[ends[e], i]) >> (cell_bits + 1)) << cell_bits
+        key = morton_key(cell[0] << key_shift, cell[1] << key_shift, cell[2] << key_shift)
+        k = np.searchsorted(bucket_keys, key)
+        best = -1.0
+        if k < bucket_keys.shape[0] and bucket_keys[k] == key:
+            for j in range(offsets[k], offsets[k + 1]):
+                f = bucket_faces[j]
+                for c in range(3):
+                    for i in range(3):
+                        tri[c, i] = snapped[faces[f, c], i] / unit
+                t = _segment_hit(a, b, tri)
+                if t < 0:
+                    continue
+                # The crossing nearest the inside end, as for unit edges.
+                if best < 0 or (t < best if start_inside[e] else t > best):
+                    best = t
+        status[e] = 0
+        if best < 0:
+            best = 0.5
+            status[e] = 1
+        out[e] = best
+
+
+def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
+                          coords: np.ndarray, starts: np.ndarray, ends: np.ndarray,
+                          start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cut point of each edge (coords[starts[e]], coords[ends[e]]) that is not a unit lattice
+    edge: coarser lattice edges and the edges of transition templates, each inside one leaf
+    no coarser than the buckets' level.
+
+    The triangles tried are those of the bucket (octree.face_buckets) holding the edge; the
+    crossing is found in floats (the ends' classes are exact, from rows), and the one nearest
+    the inside end is taken.  Returns (fractions (E,) in [0, 1] from start to end,
+    unresolved (E,) int8 = 1 where no crossing was found: midpoint).
+    """
+    out = np.empty(starts.shape[0], dtype=np.float64)
+    status = np.empty(starts.shape[0], dtype=np.int8)
+    _segment_cuts(buckets.keys, buckets.offsets, buckets.faces, snapped, np.ascontiguousarray(faces, dtype=np.int64),
+                  float(1 << snap_bits(frame)), np.ascontiguousarray(coords, dtype=np.int64),
+                  np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(ends, dtype=np.int64),
+                  np.ascontiguousarray(start_inside, dtype=np.bool_), frame.levels - buckets.level,
+                  MAX_LEVEL - frame.levels, out, status)
     return out, status

@@ -137,7 +137,7 @@ OUTSIDE, UNDECIDED, WHOLLY_INSIDE = 0, 1, 2
 
 
 def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field: SizeField,
-               prune: Callable[[np.ndarray, int], np.ndarray] | None = None
+               prune: Callable[[np.ndarray, int], np.ndarray] | None = None, finest: int | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Seed octants (keys (N,) int64, levels (N,) int8, wholly_inside (N,) bool) covering the
     box: the coarsest octants no larger than max_size whose long edge is at most the size asked
@@ -146,9 +146,11 @@ def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field:
     prune(keys, level) -> (N,) int8 class of each octant: OUTSIDE (dropped with all its
     descendants, which lets the descent start PRUNE_DEPTH levels above max_size and skip empty
     regions whole), WHOLLY_INSIDE (so are its descendants: they are not asked again) or
-    UNDECIDED.  wholly_inside flags the seeds found WHOLLY_INSIDE.
+    UNDECIDED.  wholly_inside flags the seeds found WHOLLY_INSIDE.  finest: the level of
+    long edge ``field.size`` (default frame.levels); a frame refined deeper for thin features
+    keeps the field's sizes.
     """
-    finest = frame.levels
+    finest = frame.levels if finest is None else finest
     coarse = max(0, finest - field.coarse_depth)
     level = max(0, coarse - PRUNE_DEPTH) if prune is not None else coarse
     keys, _ = uniform_leaves(frame, box_min, box_max, level)
@@ -169,7 +171,7 @@ def size_seeds(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, field:
         elif not field.regions and field.function is None:
             break
         else:
-            split = _required_size(field, keys, level, frame) < frame.h * 2.0 ** (finest - level)
+            split = _required_size(field, keys, level, frame) < frame.h * 2.0 ** (frame.levels - level)
         out_keys.append(keys[~split])
         out_levels.append(np.full(int((~split).sum()), level, dtype=np.int8))
         out_inside.append(inside[~split])

@@ -27,6 +27,9 @@ from .frame import LATTICE_TO_SPACE
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
+#: Dihedral angles (degrees) Labelle & Shewchuk prove for these alphas on a uniform BCC band;
+#: a band that changes level is measured against them (mesher: refine where a tet falls outside).
+DIHEDRAL_BOUND = (10.7, 164.8)
 
 _EDGE_PAIRS = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
 #: Direction index of a positive edge vector by its sign bits (x | y << 1 | z << 2); -1: not an edge.

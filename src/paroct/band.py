@@ -1,0 +1,155 @@
+"""The boundary band of a locally refined mesh: surface cells at the level each place asks for.
+
+Thin walls and gaps need a finer boundary than the requested size, but only where they are.
+The frame is refined ``m`` levels below the requested size (its lattice holds the coarse one:
+same origin, h / 2**m), the band is the surface cells of the coarse level, and cells asked
+for finer split into their children that still meet the surface, level by level.  Every
+leaf of the final octree that meets the surface lies inside a band cell, so every other leaf
+has one class throughout and stuffing cuts only band leaves (of several levels, and the
+transition templates between them: stuffing.warp_targets handles both).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frame import FatFrame
+from .octant import MAX_LEVEL, morton_keys
+from .octree import (FaceBuckets, balance, octant_lattice_anchors, octants_holding, octants_within,
+                     surface_cells)
+from .rays import RowCrossings, winding_numbers
+from .sizing import OUTSIDE, UNDECIDED, WHOLLY_INSIDE, SizeField, size_seeds
+
+
+@dataclass(frozen=True)
+class BandLevels:
+    """Where the band must be finer than ``coarse_level``: keys (K,) sorted octree keys of
+    cells of coarse_level, levels (K,) int8 the band level asked for in each."""
+
+    coarse_level: int
+    keys: np.ndarray
+    levels: np.ndarray
+
+    def level_of(self, keys: np.ndarray) -> np.ndarray:
+        """Band level (N,) asked for at the cells of coarse_level with these keys (coarse_level
+        where nothing finer is asked)."""
+        at = np.searchsorted(self.keys, keys)
+        found = at < self.keys.shape[0]
+        found[found] = self.keys[at[found]] == keys[found]
+        out = np.full(keys.shape[0], self.coarse_level, dtype=np.int8)
+        out[found] = self.levels[at[found]]
+        return out
+
+
+def no_band_levels(coarse_level: int) -> BandLevels:
+    return BandLevels(coarse_level, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8))
+
+
+def band_levels(frame: FatFrame, coarse_level: int, coords: np.ndarray, levels: np.ndarray, ring: int = 1) -> BandLevels:
+    """Ask for band level levels[i] in the cells of coarse_level within ``ring`` cells of the
+    lattice point coords[i] (coords (K, 3) lattice units, any real dtype); a cell asked for
+    several levels gets the finest."""
+    coords = np.asarray(coords, dtype=np.float64).reshape(-1, 3)
+    levels = np.asarray(levels, dtype=np.int8)
+    if coords.shape[0] != levels.shape[0]:
+        raise ValueError(f"len(coords) = {coords.shape[0]} but len(levels) = {levels.shape[0]}")
+    side = 1 << (frame.levels - coarse_level)
+    n_cells = 1 << coarse_level
+    cells = np.floor(coords / side).astype(np.int64)
+    r = np.arange(-ring, ring + 1)
+    offsets = np.stack(np.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3)
+    around = (cells[:, None, :] + offsets[None]).reshape(-1, 3)
+    wanted = np.repeat(levels, offsets.shape[0])
+    ok = np.all((around >= 0) & (around < n_cells), axis=1)
+    keys = morton_keys((around[ok] * side) << (MAX_LEVEL - frame.levels))
+    return _finest_per_key(coarse_level, keys, wanted[ok])
+
+
+def merge_band_levels(a: BandLevels, b: BandLevels) -> BandLevels:
+    """The finer of the two asks in every cell."""
+    if a.coarse_level != b.coarse_level:
+        raise ValueError(f"coarse levels {a.coarse_level} and {b.coarse_level} differ")
+    return _finest_per_key(a.coarse_level, np.concatenate([a.keys, b.keys]), np.concatenate([a.levels, b.levels]))
+
+
+def _finest_per_key(coarse_level: int, keys: np.ndarray, levels: np.ndarray) -> BandLevels:
+    order = np.lexsort((levels, keys))
+    keys, levels = keys[order], levels[order]
+    last = np.ones(keys.shape[0], dtype=bool)
+    last[:-1] = keys[1:] != keys[:-1]
+    return BandLevels(coarse_level, keys[last], levels[last].astype(np.int8))
+
+
+def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, buckets: FaceBuckets,
+               wanted: BandLevels) -> tuple[np.ndarray, np.ndarray]:
+    """The band: a linear octree (keys (B,) int64 sorted, levels (B,) int8) of the cells
+    that meet the surface, each at the level ``wanted`` asks for in its coarse cell.
+
+    buckets: face_buckets of wanted.coarse_level (its keys are the coarse surface cells).  A
+    cell asked finer splits into the children that meet one of the triangles of its coarse
+    cell (surface_cells, same margin), down to the level asked for.
+    """
+    coarse = wanted.coarse_level
+    keys = buckets.keys
+    asked = wanted.level_of(keys)
+    out_keys, out_levels = [], []
+    split = asked > coarse
+    if split.any():
+        sel = np.nonzero(split)[0]
+        counts = buckets.offsets[sel + 1] - buckets.offsets[sel]
+        pos = np.repeat(buckets.offsets[sel] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+        mine = np.zeros(faces.shape[0], dtype=bool)
+        mine[buckets.faces[pos]] = True
+        faces = faces[mine]
+    level = coarse
+    while True:
+        split = asked > level
+        out_keys.append(keys[~split])
+        out_levels.append(np.full(int((~split).sum()), level, dtype=np.int8))
+        if not split.any():
+            break
+        parents = keys[split]
+        level += 1
+        met = surface_cells(frame, snapped, faces, snap_bits, level)
+        parent_of = met & ~((np.int64(1) << (3 * (MAX_LEVEL - level + 1))) - 1)
+        keep = np.isin(parent_of, parents, assume_unique=False)
+        keys = met[keep]
+        asked = wanted.level_of(keys & ~((np.int64(1) << (3 * (MAX_LEVEL - coarse))) - 1))
+    keys = np.concatenate(out_keys)
+    levels = np.concatenate(out_levels)
+    order = np.argsort(keys, kind="stable")
+    return keys[order], levels[order]
+
+
+
+def local_leaves(frame: FatFrame, band_keys: np.ndarray, band_levels_: np.ndarray, surface_keys: np.ndarray,
+                 coarse_level: int, x_crossings: RowCrossings, box_min: np.ndarray, box_max: np.ndarray,
+                 field: SizeField) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may
+    hold inside tets, and in_band (N,) bool: the leaf lies in a band cell.
+
+    band_keys, band_levels_: band_cells; surface_keys: the surface cells of coarse_level
+    (sorted), whose size_seeds octants stay undecided.  Leaves outside the band meet no
+    surface: their anchor's winding number classifies them whole, and outside ones are dropped.
+    The size field is that of coarse_level (field.size); coarser leaves follow it up to
+    max_size.
+    """
+
+    def classify(octants: np.ndarray, level: int) -> np.ndarray:
+        found = np.full(octants.shape[0], UNDECIDED, dtype=np.int8)
+        free = np.nonzero(~octants_holding(octants, level, surface_keys))[0]
+        inside = winding_numbers(x_crossings, octant_lattice_anchors(octants[free], frame)) > 0
+        found[free] = np.where(inside, WHOLLY_INSIDE, OUTSIDE)
+        return found
+
+    seed_keys, seed_levels, seed_inside = size_seeds(frame, box_min, box_max, field, prune=classify, finest=coarse_level)
+    keys, levels = balance(np.concatenate([band_keys, seed_keys]), np.concatenate([band_levels_, seed_levels]))
+    in_band = octants_within(keys, levels, band_keys, band_levels_)
+    inside_keys, inside_levels = seed_keys[seed_inside], seed_levels[seed_inside]
+    order = np.argsort(inside_keys, kind="stable")
+    keep = in_band | octants_within(keys, levels, inside_keys[order], inside_levels[order])
+    ask = np.nonzero(~keep)[0]
+    keep[ask] = winding_numbers(x_crossings, octant_lattice_anchors(keys[ask], frame)) > 0
+    return keys[keep], levels[keep], in_band[keep]
