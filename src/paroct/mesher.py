@@ -250,13 +250,14 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         if frame.levels > MAX_FRAME_LEVELS:
             return None
         wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
+        framed = FramedSurface.build(surface, frame, coarse.levels)
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
                 return None
             report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
                                 solid_volume=surface.volume, input_genus=surface.genus,
                                 input_components=surface.components, stage_seconds=stage_seconds)
-            result, asks = _mesh_locally(surface, field, frame, coarse.levels, wanted, report, progress)
+            result, asks = _mesh_locally(surface, field, framed, wanted, report, progress)
             merged = merge_band_levels(wanted, asks)
             if result is not None or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
                 break
@@ -419,7 +420,7 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
 
 #: Rounds of measure-and-refine a locally refined band gets before paroct refines the whole
 #: band instead (each round refines the band around every tet outside DIHEDRAL_BOUND).
-MAX_REFINE_ROUNDS = 6
+MAX_REFINE_ROUNDS = 10
 
 
 def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
@@ -437,18 +438,38 @@ def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int
     return coarse.to_lattice(walls.points[thin]), depth
 
 
-def _mesh_locally(surface: Surface, field: SizeField, frame: FatFrame, coarse_level: int, wanted: BandLevels,
+@dataclass(frozen=True)
+class FramedSurface:
+    """The surface in one frame, for the passes that share it: snapped vertices and faces
+    (rays.snap_surface), the row crossings computed so far by direction (filled as stuffing
+    needs them), and the triangles of each surface cell of coarse_level (face_buckets)."""
+
+    frame: FatFrame
+    coarse_level: int
+    snapped: np.ndarray
+    faces: np.ndarray
+    crossings: dict
+    buckets: FaceBuckets
+
+    @classmethod
+    def build(cls, surface: Surface, frame: FatFrame, coarse_level: int) -> FramedSurface:
+        snapped = rays.snap_surface(frame, surface.vertices)
+        faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+        crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+        return cls(frame, coarse_level, snapped, faces, crossings,
+                   face_buckets(frame, snapped, faces, rays.snap_bits(frame), coarse_level))
+
+
+def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wanted: BandLevels,
                   report: MeshReport, progress: Callable[[str], None] | None) -> tuple[MeshResult | None, BandLevels]:
-    """One pass with a band refined where ``wanted`` asks (frame: the finest frame, whose
-    level coarse_level has long edge field.size).  Returns the result, or None if a tet falls
-    outside stuffing.DIHEDRAL_BOUND, and then where the band must be finer."""
+    """One pass with a band refined where ``wanted`` asks (framed.frame: the finest frame,
+    whose level framed.coarse_level has long edge field.size).  Returns the result, or None if
+    a tet falls outside stuffing.DIHEDRAL_BOUND, and then where the band must be finer."""
     stages = _Stages(report, progress)
+    frame, coarse_level, snapped, faces = framed.frame, framed.coarse_level, framed.snapped, framed.faces
+    crossings, buckets = framed.crossings, framed.buckets
     report.levels = frame.levels
-    snapped = rays.snap_surface(frame, surface.vertices)
-    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     bits = rays.snap_bits(frame)
-    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-    buckets = face_buckets(frame, snapped, faces, bits, coarse_level)
     band_keys, band_levels_ = band_cells(frame, snapped, faces, bits, buckets, wanted)
     keys, levels, in_band = local_leaves(frame, band_keys, band_levels_, buckets.keys, coarse_level,
                                          crossings[X_AXIS_DIRECTION], surface.bbox_min - field.size,

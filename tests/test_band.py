@@ -1,0 +1,139 @@
+"""A band refined locally: face buckets, band cells of several levels, cut points off the unit
+rows, and meshes of thin parts refined only near their thin places."""
+
+import manifold3d
+import numpy as np
+import pytest
+
+from paroct import octant
+from paroct.band import band_cells, band_levels, merge_band_levels
+from paroct.check import check_mesh, distances_to_triangles
+from paroct.frame import X_AXIS_DIRECTION, fat_frame
+from paroct.mesher import mesh
+from paroct.octree import face_buckets, surface_cells, tree_is_linear
+from paroct.rays import row_crossings, segment_cut_fractions, snap_bits, snap_surface, winding_numbers
+from paroct.stuffing import DIHEDRAL_BOUND
+from paroct.surface import load_surface
+
+from .naive import triangle_meets_cube
+
+ML = octant.MAX_LEVEL
+
+
+def _random_triangles(seed, frame):
+    rng = np.random.default_rng(seed)
+    n_cells = 1 << frame.levels
+    bits = snap_bits(frame)
+    tris = rng.uniform(0.5, n_cells - 0.5, size=(8, 3, 3))
+    tris = np.concatenate([tris, [[[2, 2, 2], [5, 2, 2], [2, 5, 2]]]])  # on cell planes
+    snapped = np.round(tris.reshape(-1, 3) * (1 << bits)).astype(np.int64)
+    return snapped, np.arange(len(snapped)).reshape(-1, 3), snapped.reshape(-1, 3, 3) / (1 << bits)
+
+
+def _cells(keys, frame, level):
+    side = 1 << (frame.levels - level)
+    return [tuple(int(v) // side for v in c) for c in octant.morton_decode(keys >> (3 * (ML - frame.levels)))]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_face_buckets_hold_every_triangle_meeting_their_cell(seed):
+    frame = fat_frame(np.zeros(3), np.ones(3), 0.25)
+    snapped, faces, tris = _random_triangles(seed, frame)
+    bits = snap_bits(frame)
+    for level in (frame.levels, frame.levels - 2):
+        side = 1 << (frame.levels - level)
+        buckets = face_buckets(frame, snapped, faces, bits, level)
+        assert np.array_equal(buckets.keys, surface_cells(frame, snapped, faces, bits, level))
+        for k, cell in enumerate(_cells(buckets.keys, frame, level)):
+            listed = buckets.faces[buckets.offsets[k]:buckets.offsets[k + 1]]
+            assert np.all(np.diff(listed) > 0)
+            meeting = [f for f in range(len(tris)) if triangle_meets_cube(tris[f], np.array(cell) * side, side)]
+            assert set(meeting) <= set(listed.tolist())
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_band_cells_meet_the_surface_at_the_level_asked(seed):
+    rng = np.random.default_rng(10 + seed)
+    frame = fat_frame(np.zeros(3), np.ones(3), 0.25)
+    snapped, faces, tris = _random_triangles(seed, frame)
+    bits = snap_bits(frame)
+    coarse = frame.levels - 2
+    buckets = face_buckets(frame, snapped, faces, bits, coarse)
+    # Ask two random points for one and two levels finer; one ask overlaps the other.
+    points = rng.uniform(2, (1 << frame.levels) - 2, size=(2, 3))
+    wanted = merge_band_levels(band_levels(frame, coarse, points[:1], [coarse + 1]),
+                               band_levels(frame, coarse, points[1:], [coarse + 2]))
+    keys, levels = band_cells(frame, snapped, faces, bits, buckets, wanted)
+    assert tree_is_linear(keys, levels)
+    coarse_side = 1 << (frame.levels - coarse)
+    asked = dict(zip(_cells(wanted.keys, frame, coarse), wanted.levels.tolist()))
+    for key, level in zip(keys, levels):
+        side = 1 << (frame.levels - level)
+        (cell,) = _cells(np.array([key]), frame, level)
+        anchor = np.array(cell) * side
+        assert level == asked.get(tuple(int(v) // coarse_side for v in anchor), coarse)
+        assert any(triangle_meets_cube(t, anchor, side) for t in tris)
+    # Every triangle point lies in a band cell: sample each triangle densely.
+    w = rng.dirichlet(np.ones(3), size=200)
+    samples = (w[None, :, :, None] * tris[:, None, :, :]).sum(axis=2).reshape(-1, 3)
+    anchors = octant.morton_decode(keys) >> (ML - frame.levels)
+    sides = (1 << (frame.levels - levels.astype(np.int64)))[:, None]
+    inside = np.all((samples[:, None, :] >= anchors[None]) & (samples[:, None, :] <= anchors[None] + sides[None]), axis=2)
+    assert inside.any(axis=1).all()
+    # Asked deeper than any cell splits: levels reach coarse + 2 where a triangle passes the ask.
+    assert set(np.unique(levels)) <= {coarse, coarse + 1, coarse + 2}
+
+
+def test_segment_cut_points_lie_on_the_surface_between_ends_of_two_classes():
+    sphere = manifold3d.Manifold.sphere(1.0, 48)
+    surface = load_surface(sphere)
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, 0.1)
+    snapped = snap_surface(frame, surface.vertices)
+    faces = surface.faces.astype(np.int64)
+    coarse = frame.levels - 2
+    buckets = face_buckets(frame, snapped, faces, snap_bits(frame), coarse)
+    rng = np.random.default_rng(3)
+    # Edges off the unit rows, as template and coarse lattice edges are, each inside one coarse cell.
+    directions = np.array([[1, -1, 0], [2, 1, -1], [0, 2, 0], [1, 1, 2], [-2, 2, 2], [4, 0, 0]])
+    cells = octant.morton_decode(buckets.keys) >> (ML - frame.levels)
+    starts = cells[rng.integers(0, len(cells), 3000)] + rng.integers(0, 5, size=(3000, 3))
+    ends = starts + directions[rng.integers(0, len(directions), 3000)]
+    inside_one_cell = np.all(ends // 4 == starts // 4, axis=1)  # coarse cells are 4 lattice units wide
+    starts, ends = starts[inside_one_cell], ends[inside_one_cell]
+    x_rows = row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)
+    start_in = winding_numbers(x_rows, starts) > 0
+    end_in = winding_numbers(x_rows, ends) > 0
+    cut = np.nonzero(start_in != end_in)[0]
+    assert cut.size > 100
+    coords = np.concatenate([starts[cut], ends[cut]])
+    n = cut.size
+    fracs, unresolved = segment_cut_fractions(buckets, frame, snapped, faces, coords, np.arange(n), np.arange(n) + n,
+                                              start_in[cut])
+    assert not unresolved.any() and np.all((fracs >= 0) & (fracs <= 1))
+    points = frame.to_space(starts[cut] + fracs[:, None] * (ends[cut] - starts[cut]))
+    # On the snapped surface: within the snap resolution of the input.
+    assert distances_to_triangles(points, surface.vertices, surface.faces).max() < 2 * frame.h * 2.0 ** -snap_bits(frame)
+
+
+def _slot_block():
+    """A block with a thin slot cut into it and a thin fin on top: a gap and a wall."""
+    block = manifold3d.Manifold.cube([1.0, 1.0, 0.5])
+    slot = manifold3d.Manifold.cube([0.6, 0.04, 0.3]).translate([0.2, 0.48, 0.25])
+    fin = manifold3d.Manifold.cube([0.8, 0.035, 0.3]).translate([0.1, 0.2, 0.5])
+    return block - slot + fin
+
+
+@pytest.mark.parametrize("size", [0.1, 0.07])
+def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size):
+    surface = load_surface(_slot_block())
+    result = mesh(surface, size=size)
+    rep = result.report
+    assert rep.size < size / 2 and any("only near" in note for note in rep.notes) and not rep.warnings
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert abs(rep.volume_error) < 0.01
+    assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert 30 <= rep.interior_min_dihedral and rep.interior_max_dihedral <= 135
+    everywhere = mesh(surface, size=rep.size, max_size=rep.max_size, thin_features=False)
+    assert rep.n_tets < 0.6 * everywhere.report.n_tets
