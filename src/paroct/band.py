@@ -114,7 +114,8 @@ def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bit
         level += 1
         met = surface_cells(frame, snapped, faces, snap_bits, level)
         parent_of = met & ~((np.int64(1) << (3 * (MAX_LEVEL - level + 1))) - 1)
-        keep = np.isin(parent_of, parents, assume_unique=False)
+        at = np.minimum(np.searchsorted(parents, parent_of), parents.shape[0] - 1)  # parents: sorted keys
+        keep = parents[at] == parent_of
         keys = met[keep]
         asked = wanted.level_of(keys & ~((np.int64(1) << (3 * (MAX_LEVEL - coarse))) - 1))
     keys = np.concatenate(out_keys)

@@ -328,7 +328,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
     keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
-    report.leaf_levels = tuple(int(v) for v in np.unique(frame.levels - levels))
+    report.leaf_levels = tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
     stages.done("octree")
 
     # The band's vertices come first, so its classes, cut edges and warps keep their ids.
@@ -475,7 +475,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
                                          crossings[X_AXIS_DIRECTION], surface.bbox_min - field.size,
                                          surface.bbox_max + field.size, field)
     report.n_leaves = int(keys.shape[0])
-    report.leaf_levels = tuple(int(v) for v in np.unique(frame.levels - levels))
+    report.leaf_levels = tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
     stages.done("octree")
 
     sides = np.int64(1) << (frame.levels - levels.astype(np.int64))
@@ -492,7 +492,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report, buckets)
     spacing = vertex_spacing(vertices, sides)
     targets = warp_targets(cuts, coords, frame.h, spacing)
-    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
+    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets, flat_ok=True)
     stages.done("stuff")
 
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
@@ -526,7 +526,10 @@ def _band_vertex_ids(vertices: LeafVertices, in_band: np.ndarray) -> np.ndarray:
     """Ids of the vertices of the band leaves (in_band (L,)): corners and split points."""
     rows = vertices.split_row[in_band]
     split = vertices.split_ids[rows[rows >= 0]].ravel()
-    return np.unique(np.concatenate([vertices.corner_ids[in_band].ravel(), split[split >= 0]]))
+    marked = np.zeros(vertices.coords.shape[0], dtype=bool)
+    marked[vertices.corner_ids[in_band].ravel()] = True
+    marked[split[split >= 0]] = True
+    return np.nonzero(marked)[0]
 
 
 @dataclass(frozen=True)

@@ -544,13 +544,15 @@ def _orient(points, tets, touched):
 
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
-          cuts: CutEdges, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points kept.
 
     lattice_points: (V, 3) space positions of the lattice vertices; coords: (V, 3) their
     lattice coordinates; tets: (T, 4) lattice tets; inside: (V,) class of each vertex;
     cuts: the cut edges of these tets; targets: warp_targets(cuts, coords, h).
-    Points V.. V+E-1 are the cut points (only those still on a +/- edge are used).
+    Points V.. V+E-1 are the cut points (only those still on a +/- edge are used).  A flat
+    tet is a bug on a one-level band (AssertionError); flat_ok keeps it, for a band that
+    changes level, whose caller measures every tet and refines where one is bad.
     """
     n_lattice = lattice_points.shape[0]
     warped = targets >= 0
@@ -566,6 +568,6 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     if _stencils(tets, signs, coords, cuts.table, n_lattice, PRISM_TETS, offsets, out, touched):
         raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
     flat = _orient(points, out, touched)
-    if flat:
+    if flat and not flat_ok:
         raise AssertionError(f"stuffing produced {flat} flat tets")
     return points, out
