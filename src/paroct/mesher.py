@@ -205,9 +205,11 @@ def mesh(
         attempt = _at_boundary_size(field, band)
         result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
         if thin_features and lost and band == h and walls is not None:
-            local = _thin_locally(surface, field, walls, floor, budget, lost, progress, stage_seconds)
+            local, why = _thin_locally(surface, field, walls, floor, budget, lost, progress, stage_seconds)
             if local is not None:
                 return local
+            if why:
+                notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
         finer = band
         if walls is not None and walls.thickness.size:
             while finer > walls.thickness.min() / 2:
@@ -233,49 +235,56 @@ def mesh(
 
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
-                  progress: Callable[[str], None] | None, stage_seconds: dict) -> MeshResult | None:
+                  progress: Callable[[str], None] | None, stage_seconds: dict) -> tuple[MeshResult | None, str]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure and refine until every tet is within DIHEDRAL_BOUND, and one
-    level more while the mesh still loses topology or volume.  None if that does not succeed
-    (no thin place found, the floor or the memory budget reached, or tets still outside the
-    bound): then the caller refines the whole band."""
+    level more while the mesh still loses topology or volume.  Returns the result, or None and
+    why that did not succeed (no thin place found: ''; the floor or the memory budget reached;
+    the rounds stopped finding fewer tets outside the bound): then the caller refines the
+    whole band."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = int(np.floor(np.log2(field.size / floor) + 1e-9))
     notes = [f"at boundary size {field.size:.4g} {lost}"]
     for extra in range(max_depth):
         points, depth = _thin_asks(coarse, walls, max_depth, extra)
         if depth.size == 0:
-            return None
+            return None, ""
         frame = _refined_frame(coarse, int(depth.max()))
         if frame.levels > MAX_FRAME_LEVELS:
-            return None
+            return None, f"a frame of {frame.levels} levels is too deep"
         wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
         framed = FramedSurface.build(surface, frame, coarse.levels)
+        fewest, stalled = np.iinfo(np.int64).max, 0
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
-                return None
+                return None, "it would not fit in memory (max_memory)"
             report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
                                 solid_volume=surface.volume, input_genus=surface.genus,
                                 input_components=surface.components, stage_seconds=stage_seconds)
             result, asks = _mesh_locally(surface, field, framed, wanted, report, progress)
+            if result is not None:
+                break
+            fewest, stalled = (report.bad_tets, 0) if report.bad_tets < fewest else (fewest, stalled + 1)
             merged = merge_band_levels(wanted, asks)
-            if result is not None or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
+            if stalled == STALLED_ROUNDS or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
                 break
             wanted = merged
         if result is None:
-            return None
+            return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
+                          f"degrees after {rounds} measure-and-refine rounds")
         thinnest = int(np.argmin(walls.thickness))
+        layers = f", {extra} level{'s' * (extra > 1)} finer than two layers need" if extra else ""
         notes.append(f"boundary refined to {frame.h:.4g} only near the {depth.size} samples of walls and gaps thinner "
                      f"than 2 x size (thinnest {'wall' if walls.is_wall[thinnest] else 'gap'} "
-                     f"{walls.thickness[thinnest]:.4g}), in {rounds} measure-and-refine round{'s' * (rounds > 1)}")
+                     f"{walls.thickness[thinnest]:.4g}{layers}), in {rounds} measure-and-refine round{'s' * (rounds > 1)}")
         still = _losses(report)
         if not still:
             report.notes = notes
-            return result
+            return result, ""
         notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
         if depth.min() >= max_depth:
-            return None
-    return None
+            break
+    return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost"
 
 
 #: Default min_size: size divided by this.
@@ -419,8 +428,10 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
 
 
 #: Rounds of measure-and-refine a locally refined band gets before paroct refines the whole
-#: band instead (each round refines the band around every tet outside DIHEDRAL_BOUND).
+#: band instead (each round refines the band around every tet outside DIHEDRAL_BOUND) ...
 MAX_REFINE_ROUNDS = 10
+#: ... or as soon as this many rounds in a row found no fewer bad tets than the best before.
+STALLED_ROUNDS = 3
 
 
 def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
