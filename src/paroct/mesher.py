@@ -254,20 +254,29 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             return None, f"a frame of {frame.levels} levels is too deep"
         wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
         framed = FramedSurface.build(surface, frame, coarse.levels)
-        fewest, stalled = np.iinfo(np.int64).max, 0
+        fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
                 return None, "it would not fit in memory (max_memory)"
             report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
                                 solid_volume=surface.volume, input_genus=surface.genus,
                                 input_components=surface.components, stage_seconds=stage_seconds)
-            result, asks = _mesh_locally(surface, field, framed, wanted, report, progress)
+            result, asks = _mesh_locally(surface, field, framed, wanted, report, progress, window)
             if result is not None:
                 break
-            fewest, stalled = (report.bad_tets, 0) if report.bad_tets < fewest else (fewest, stalled + 1)
+            if window is None:
+                fewest, stalled = (report.bad_tets, 0) if report.bad_tets < fewest else (fewest, stalled + 1)
+            elif asks.keys.size == 0:  # the refined cells are clean: check everything
+                window = None
+                continue
             merged = merge_band_levels(wanted, asks)
             if stalled == STALLED_ROUNDS or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
                 break
+            # Only the cells near the new asks change: check those alone until they are clean.
+            changed = merged.keys[wanted.level_of(merged.keys) != merged.levels]
+            anchors = octant_lattice_anchors(changed, frame)
+            window = tuple(band_levels(frame, coarse.levels, anchors, np.full(changed.shape[0], coarse.levels), ring).keys
+                           for ring in (WINDOW_RING, WINDOW_RING - 2))
             wanted = merged
         if result is None:
             return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
@@ -432,6 +441,10 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
 MAX_REFINE_ROUNDS = 10
 #: ... or as soon as this many rounds in a row found no fewer bad tets than the best before.
 STALLED_ROUNDS = 3
+#: Rounds after the first stuff the coarse cells within this ring of the cells just refined
+#: (2:1 balance and templates change the leaves up to about two cells away) and measure the
+#: tets two cells less far; the whole band is measured again once those are clean.
+WINDOW_RING = 4
 
 
 def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
@@ -472,10 +485,15 @@ class FramedSurface:
 
 
 def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wanted: BandLevels,
-                  report: MeshReport, progress: Callable[[str], None] | None) -> tuple[MeshResult | None, BandLevels]:
+                  report: MeshReport, progress: Callable[[str], None] | None,
+                  window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[MeshResult | None, BandLevels]:
     """One pass with a band refined where ``wanted`` asks (framed.frame: the finest frame,
     whose level framed.coarse_level has long edge field.size).  Returns the result, or None if
-    a tet falls outside stuffing.DIHEDRAL_BOUND, and then where the band must be finer."""
+    a tet falls outside stuffing.DIHEDRAL_BOUND, and then where the band must be finer.
+
+    window: (outer, inner) sorted keys of coarse cells.  Then the pass only checks: it stuffs
+    the leaves in the outer cells and measures the tets whose lattice vertices all lie in the
+    inner ones, and always returns None (no asks: none of those is bad)."""
     stages = _Stages(report, progress)
     frame, coarse_level, snapped, faces = framed.frame, framed.coarse_level, framed.snapped, framed.faces
     crossings, buckets = framed.crossings, framed.buckets
@@ -487,6 +505,9 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
                                          surface.bbox_max + field.size, field)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
+    if window is not None:
+        keep = _in_cells(keys, window[0], coarse_level)
+        keys, levels, in_band = keys[keep], levels[keep], in_band[keep]
     stages.done("octree")
 
     sides = np.int64(1) << (frame.levels - levels.astype(np.int64))
@@ -510,6 +531,13 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # changes level may give tets outside the bound, and then this pass only says where.
     quality = tet_quality(points, out_tets)
     bad = np.nonzero((quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1]))[0]
+    if window is not None and bad.size:
+        lattice = out_tets[bad].astype(np.int64)
+        is_lattice = lattice < coords.shape[0]
+        some = lattice[np.arange(bad.size), np.argmax(is_lattice, axis=1)][:, None]  # every tet has one
+        cells = morton_keys((coords[np.where(is_lattice, lattice, some)].reshape(-1, 3)
+                             >> (frame.levels - coarse_level)) << (MAX_LEVEL - coarse_level))
+        bad = bad[_in_cells(cells, window[1], coarse_level).reshape(-1, 4).all(axis=1)]
     report.bad_tets = int(bad.size)
     asks = no_band_levels(coarse_level)
     if bad.size:
@@ -527,10 +555,21 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         asks = band_levels(frame, coarse_level, coords[lattice[rows, cols]], level[rows])
         stages.done("quality")
         return None, asks
+    if window is not None:
+        stages.done("quality")
+        return None, asks
     points, out_tets = _repair_and_measure(points, out_tets, inside, targets, report, stages)
     result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
     report.n_vertices = int(result.mesh.points.shape[0])
     return result, asks
+
+
+def _in_cells(keys: np.ndarray, cells: np.ndarray, coarse_level: int) -> np.ndarray:
+    """Mask (N,) of the octants (keys (N,), of coarse_level or finer) inside one of the coarse
+    cells (sorted keys).  A coarser octant counts when its anchor's cell is one of them."""
+    anchors = keys & ~((np.int64(1) << (3 * (MAX_LEVEL - coarse_level))) - 1)
+    at = np.minimum(np.searchsorted(cells, anchors), max(cells.shape[0] - 1, 0))
+    return (cells[at] == anchors) if cells.shape[0] else np.zeros(keys.shape[0], dtype=bool)
 
 
 def _band_vertex_ids(vertices: LeafVertices, in_band: np.ndarray) -> np.ndarray:
