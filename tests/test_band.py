@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from paroct import octant
-from paroct.band import band_cells, band_levels, merge_band_levels
+from paroct.band import FineSurfaceCells, band_cells, band_levels, merge_band_levels
 from paroct.check import check_mesh, distances_to_triangles
 from paroct.frame import X_AXIS_DIRECTION, fat_frame
 from paroct.mesher import mesh
@@ -65,6 +65,11 @@ def test_band_cells_meet_the_surface_at_the_level_asked(seed):
                                band_levels(frame, coarse, points[1:], [coarse + 2]))
     keys, levels = band_cells(frame, snapped, faces, bits, buckets, wanted)
     assert tree_is_linear(keys, levels)
+    # Finer cells kept from a pass that asked less give the same band.
+    fine = FineSurfaceCells()
+    band_cells(frame, snapped, faces, bits, buckets, band_levels(frame, coarse, points[:1], [coarse + 1]), fine)
+    again = band_cells(frame, snapped, faces, bits, buckets, wanted, fine)
+    assert np.array_equal(again[0], keys) and np.array_equal(again[1], levels)
     coarse_side = 1 << (frame.levels - coarse)
     asked = dict(zip(_cells(wanted.keys, frame, coarse), wanted.levels.tolist()))
     for key, level in zip(keys, levels):

@@ -11,12 +11,12 @@ transition templates between them: stuffing.warp_targets handles both).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, morton_keys
+from .octant import MAX_LEVEL, morton_keys, sorted_unique
 from .octree import (FaceBuckets, balance, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
@@ -82,27 +82,32 @@ def _finest_per_key(coarse_level: int, keys: np.ndarray, levels: np.ndarray) -> 
     return BandLevels(coarse_level, keys[last], levels[last].astype(np.int8))
 
 
+@dataclass(frozen=True)
+class FineSurfaceCells:
+    """Surface cells finer than a coarse level, computed coarse cell by coarse cell as band_cells
+    asks for them, for the passes that share a frame: for each level, done[level] the sorted
+    coarse keys whose descendants meeting the surface are in met[level] (sorted keys)."""
+
+    done: dict = field(default_factory=dict)
+    met: dict = field(default_factory=dict)
+
+
 def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, buckets: FaceBuckets,
-               wanted: BandLevels) -> tuple[np.ndarray, np.ndarray]:
+               wanted: BandLevels, fine: FineSurfaceCells | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The band: a linear octree (keys (B,) int64 sorted, levels (B,) int8) of the cells
     that meet the surface, each at the level ``wanted`` asks for in its coarse cell.
 
     buckets: face_buckets of wanted.coarse_level (its keys are the coarse surface cells).  A
     cell asked finer splits into the children that meet one of the triangles of its coarse
-    cell (surface_cells, same margin), down to the level asked for.
+    cell (surface_cells, same margin), down to the level asked for.  fine: the finer surface
+    cells found so far in this frame, extended here (default: a new, empty one).
     """
     coarse = wanted.coarse_level
+    fine = FineSurfaceCells() if fine is None else fine
+    coarse_mask = ~((np.int64(1) << (3 * (MAX_LEVEL - coarse))) - 1)
     keys = buckets.keys
     asked = wanted.level_of(keys)
     out_keys, out_levels = [], []
-    split = asked > coarse
-    if split.any():
-        sel = np.nonzero(split)[0]
-        counts = buckets.offsets[sel + 1] - buckets.offsets[sel]
-        pos = np.repeat(buckets.offsets[sel] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-        mine = np.zeros(faces.shape[0], dtype=bool)
-        mine[buckets.faces[pos]] = True
-        faces = faces[mine]
     level = coarse
     while True:
         split = asked > level
@@ -112,17 +117,48 @@ def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bit
             break
         parents = keys[split]
         level += 1
-        met = surface_cells(frame, snapped, faces, snap_bits, level)
+        met = _fine_surface_cells(frame, snapped, faces, snap_bits, buckets, fine, level,
+                                  sorted_unique(parents & coarse_mask))
         parent_of = met & ~((np.int64(1) << (3 * (MAX_LEVEL - level + 1))) - 1)
         at = np.minimum(np.searchsorted(parents, parent_of), parents.shape[0] - 1)  # parents: sorted keys
         keep = parents[at] == parent_of
         keys = met[keep]
-        asked = wanted.level_of(keys & ~((np.int64(1) << (3 * (MAX_LEVEL - coarse))) - 1))
+        asked = wanted.level_of(keys & coarse_mask)
     keys = np.concatenate(out_keys)
     levels = np.concatenate(out_levels)
     order = np.argsort(keys, kind="stable")
     return keys[order], levels[order]
 
+
+def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, buckets: FaceBuckets,
+                        fine: FineSurfaceCells, level: int, coarse_keys: np.ndarray) -> np.ndarray:
+    """Sorted surface cells of ``level`` inside the coarse cells coarse_keys (sorted, all
+    surface cells of buckets.level), from ``fine`` and, for coarse cells new to it, from their
+    buckets' triangles."""
+    coarse_mask = ~((np.int64(1) << (3 * (MAX_LEVEL - buckets.level))) - 1)
+    done = fine.done.get(level, np.zeros(0, dtype=np.int64))
+    met = fine.met.get(level, np.zeros(0, dtype=np.int64))
+    new = coarse_keys[~_sorted_member(coarse_keys, done)]
+    if new.size:
+        at = np.searchsorted(buckets.keys, new)
+        counts = buckets.offsets[at + 1] - buckets.offsets[at]
+        pos = np.repeat(buckets.offsets[at] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+        mine = np.zeros(faces.shape[0], dtype=bool)
+        mine[buckets.faces[pos]] = True
+        found = surface_cells(frame, snapped, faces[mine], snap_bits, level)
+        found = found[_sorted_member(found & coarse_mask, new)]
+        met = np.sort(np.concatenate([met, found]))
+        done = np.sort(np.concatenate([done, new]))
+        fine.done[level], fine.met[level] = done, met
+    return met[_sorted_member(met & coarse_mask, coarse_keys)]
+
+
+def _sorted_member(values: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """Mask (N,) of the values found in sorted_keys."""
+    if sorted_keys.shape[0] == 0:
+        return np.zeros(values.shape[0], dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_keys, values), sorted_keys.shape[0] - 1)
+    return sorted_keys[at] == values
 
 
 def local_leaves(frame: FatFrame, band_keys: np.ndarray, band_levels_: np.ndarray, surface_keys: np.ndarray,

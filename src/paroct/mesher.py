@@ -18,7 +18,7 @@ from .errors import ParoctError
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
-from .band import BandLevels, band_cells, band_levels, local_leaves, merge_band_levels, no_band_levels
+from .band import BandLevels, FineSurfaceCells, band_cells, band_levels, local_leaves, merge_band_levels, no_band_levels
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, morton_keys, sorted_unique
 from .octree import (FaceBuckets, balance, face_buckets, octant_lattice_anchors, octants_holding, octants_within,
@@ -466,7 +466,8 @@ def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int
 class FramedSurface:
     """The surface in one frame, for the passes that share it: snapped vertices and faces
     (rays.snap_surface), the row crossings computed so far by direction (filled as stuffing
-    needs them), and the triangles of each surface cell of coarse_level (face_buckets)."""
+    needs them), the triangles of each surface cell of coarse_level (face_buckets) and the
+    finer surface cells found so far (filled as band_cells needs them)."""
 
     frame: FatFrame
     coarse_level: int
@@ -474,6 +475,7 @@ class FramedSurface:
     faces: np.ndarray
     crossings: dict
     buckets: FaceBuckets
+    fine_cells: FineSurfaceCells
 
     @classmethod
     def build(cls, surface: Surface, frame: FatFrame, coarse_level: int) -> FramedSurface:
@@ -481,7 +483,7 @@ class FramedSurface:
         faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
         crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
         return cls(frame, coarse_level, snapped, faces, crossings,
-                   face_buckets(frame, snapped, faces, rays.snap_bits(frame), coarse_level))
+                   face_buckets(frame, snapped, faces, rays.snap_bits(frame), coarse_level), FineSurfaceCells())
 
 
 def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wanted: BandLevels,
@@ -499,7 +501,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     crossings, buckets = framed.crossings, framed.buckets
     report.levels = frame.levels
     bits = rays.snap_bits(frame)
-    band_keys, band_levels_ = band_cells(frame, snapped, faces, bits, buckets, wanted)
+    band_keys, band_levels_ = band_cells(frame, snapped, faces, bits, buckets, wanted, framed.fine_cells)
     keys, levels, in_band = local_leaves(frame, band_keys, band_levels_, buckets.keys, coarse_level,
                                          crossings[X_AXIS_DIRECTION], surface.bbox_min - field.size,
                                          surface.bbox_max + field.size, field)
