@@ -177,10 +177,12 @@ def mesh(
     a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
     evaluated at octant corners and centres (both are clamped to at least size).
     thin_features: when the mesh loses topology (boundary components, genus) or more than 1 %
-    of the volume, the boundary size shrinks by halves (down to min_size, default size / 8) and
-    the solid is meshed again: first straight to two element layers across the thinnest wall
-    or gap found, then by halves while it still loses, as far as max_memory allows; False
-    keeps size and only warns.  max_memory: bytes the run may use (default: the machine's
+    of the volume, the solid is meshed again with the boundary refined only near the walls and
+    gaps thinner than 2 * size, to two element layers across each (down to min_size, default
+    size / 8), every tet measured and the band refined around any outside [10.7, 164.8]
+    degrees; if that does not keep the solid, the whole boundary size shrinks by halves
+    instead, as far as max_memory allows.  The report's notes say what was done.  False keeps
+    size and only warns.  max_memory: bytes the run may use (default: the machine's
     available memory); a size that would need more is refused before any work.  progress:
     called with each stage's name when it ends.
     """
