@@ -76,3 +76,23 @@ def test_sorted_unique_matches_numpy_unique(seed):
     assert np.array_equal(octant.sorted_unique(values), np.unique(values))
     keys = octant.morton_keys(rng.integers(0, 1 << 10, size=(200, 3)))
     assert np.array_equal(octant.sorted_unique(np.concatenate([keys, keys[::3]])), np.unique(keys))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_ancestor_keys_match_coarsened_coordinates(seed):
+    rng = np.random.default_rng(seed)
+    level = int(rng.integers(0, octant.MAX_LEVEL + 1))
+    coords = rng.integers(0, 1 << octant.MAX_LEVEL, size=(100, 3))
+    side = 1 << (octant.MAX_LEVEL - level)
+    want = octant.morton_keys(coords // side * side)
+    assert np.array_equal(octant.ancestor_keys(octant.morton_keys(coords), level), want)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sorted_lookup_matches_isin_and_index(seed):
+    rng = np.random.default_rng(seed)
+    keys = octant.sorted_unique(rng.integers(0, 1000, size=int(rng.integers(0, 200))))
+    values = rng.integers(-10, 1010, size=300)
+    at, found = octant.sorted_lookup(keys, values)
+    assert np.array_equal(found, np.isin(values, keys))
+    assert np.array_equal(keys[at[found]], values[found])

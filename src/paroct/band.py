@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, morton_keys, sorted_unique
+from .octant import MAX_LEVEL, ancestor_keys, morton_keys, sorted_lookup, sorted_unique
 from .octree import (FaceBuckets, balance, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
@@ -35,9 +35,7 @@ class BandLevels:
     def level_of(self, keys: np.ndarray) -> np.ndarray:
         """Band level (N,) asked for at the cells of coarse_level with these keys (coarse_level
         where nothing finer is asked)."""
-        at = np.searchsorted(self.keys, keys)
-        found = at < self.keys.shape[0]
-        found[found] = self.keys[at[found]] == keys[found]
+        at, found = sorted_lookup(self.keys, keys)
         out = np.full(keys.shape[0], self.coarse_level, dtype=np.int8)
         out[found] = self.levels[at[found]]
         return out
@@ -104,7 +102,6 @@ def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bit
     """
     coarse = wanted.coarse_level
     fine = FineSurfaceCells() if fine is None else fine
-    coarse_mask = ~((np.int64(1) << (3 * (MAX_LEVEL - coarse))) - 1)
     keys = buckets.keys
     asked = wanted.level_of(keys)
     out_keys, out_levels = [], []
@@ -118,12 +115,9 @@ def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bit
         parents = keys[split]
         level += 1
         met = _fine_surface_cells(frame, snapped, faces, snap_bits, buckets, fine, level,
-                                  sorted_unique(parents & coarse_mask))
-        parent_of = met & ~((np.int64(1) << (3 * (MAX_LEVEL - level + 1))) - 1)
-        at = np.minimum(np.searchsorted(parents, parent_of), parents.shape[0] - 1)  # parents: sorted keys
-        keep = parents[at] == parent_of
-        keys = met[keep]
-        asked = wanted.level_of(keys & coarse_mask)
+                                  sorted_unique(ancestor_keys(parents, coarse)))
+        keys = met[sorted_lookup(parents, ancestor_keys(met, level - 1))[1]]
+        asked = wanted.level_of(ancestor_keys(keys, coarse))
     keys = np.concatenate(out_keys)
     levels = np.concatenate(out_levels)
     order = np.argsort(keys, kind="stable")
@@ -135,10 +129,9 @@ def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
     """Sorted surface cells of ``level`` inside the coarse cells coarse_keys (sorted, all
     surface cells of buckets.level), from ``fine`` and, for coarse cells new to it, from their
     buckets' triangles."""
-    coarse_mask = ~((np.int64(1) << (3 * (MAX_LEVEL - buckets.level))) - 1)
     done = fine.done.get(level, np.zeros(0, dtype=np.int64))
     met = fine.met.get(level, np.zeros(0, dtype=np.int64))
-    new = coarse_keys[~_sorted_member(coarse_keys, done)]
+    new = coarse_keys[~sorted_lookup(done, coarse_keys)[1]]
     if new.size:
         at = np.searchsorted(buckets.keys, new)
         counts = buckets.offsets[at + 1] - buckets.offsets[at]
@@ -146,33 +139,17 @@ def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
         mine = np.zeros(faces.shape[0], dtype=bool)
         mine[buckets.faces[pos]] = True
         found = surface_cells(frame, snapped, faces[mine], snap_bits, level)
-        found = found[_sorted_member(found & coarse_mask, new)]
+        found = found[sorted_lookup(new, ancestor_keys(found, buckets.level))[1]]
         met = np.sort(np.concatenate([met, found]))
         done = np.sort(np.concatenate([done, new]))
         fine.done[level], fine.met[level] = done, met
-    return met[_sorted_member(met & coarse_mask, coarse_keys)]
+    return met[sorted_lookup(coarse_keys, ancestor_keys(met, buckets.level))[1]]
 
 
-def _sorted_member(values: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
-    """Mask (N,) of the values found in sorted_keys."""
-    if sorted_keys.shape[0] == 0:
-        return np.zeros(values.shape[0], dtype=bool)
-    at = np.minimum(np.searchsorted(sorted_keys, values), sorted_keys.shape[0] - 1)
-    return sorted_keys[at] == values
-
-
-def local_leaves(frame: FatFrame, band_keys: np.ndarray, band_levels_: np.ndarray, surface_keys: np.ndarray,
-                 coarse_level: int, x_crossings: RowCrossings, box_min: np.ndarray, box_max: np.ndarray,
-                 field: SizeField) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may
-    hold inside tets, and in_band (N,) bool: the leaf lies in a band cell.
-
-    band_keys, band_levels_: band_cells; surface_keys: the surface cells of coarse_level
-    (sorted), whose size_seeds octants stay undecided.  Leaves outside the band meet no
-    surface: their anchor's winding number classifies them whole, and outside ones are dropped.
-    The size field is that of coarse_level (field.size); coarser leaves follow it up to
-    max_size.
-    """
+def surface_prune(frame: FatFrame, surface_keys: np.ndarray, x_crossings: RowCrossings):
+    """The size_seeds prune of an octree whose surface cells are surface_keys (sorted, of one
+    level): an octant of that level or coarser that holds none of them has one class
+    throughout, its anchor's winding number; one that holds one stays undecided."""
 
     def classify(octants: np.ndarray, level: int) -> np.ndarray:
         found = np.full(octants.shape[0], UNDECIDED, dtype=np.int8)
@@ -181,12 +158,39 @@ def local_leaves(frame: FatFrame, band_keys: np.ndarray, band_levels_: np.ndarra
         found[free] = np.where(inside, WHOLLY_INSIDE, OUTSIDE)
         return found
 
-    seed_keys, seed_levels, seed_inside = size_seeds(frame, box_min, box_max, field, prune=classify, finest=coarse_level)
-    keys, levels = balance(np.concatenate([band_keys, seed_keys]), np.concatenate([band_levels_, seed_levels]))
-    in_band = octants_within(keys, levels, band_keys, band_levels_)
+    return classify
+
+
+def kept_leaves(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, in_band: np.ndarray, seeds: tuple,
+                x_crossings: RowCrossings) -> np.ndarray:
+    """Mask (N,) of the leaves that may hold inside tets: band leaves, leaves inside a seed
+    size_seeds found wholly inside (balance only splits seeds), and the other leaves whose
+    anchor is inside (they meet no surface, so the anchor classifies them whole).
+    seeds: size_seeds' (keys, levels, wholly_inside)."""
+    seed_keys, seed_levels, seed_inside = seeds
     inside_keys, inside_levels = seed_keys[seed_inside], seed_levels[seed_inside]
     order = np.argsort(inside_keys, kind="stable")
     keep = in_band | octants_within(keys, levels, inside_keys[order], inside_levels[order])
     ask = np.nonzero(~keep)[0]
     keep[ask] = winding_numbers(x_crossings, octant_lattice_anchors(keys[ask], frame)) > 0
+    return keep
+
+
+def local_leaves(frame: FatFrame, band_keys: np.ndarray, band_cell_levels: np.ndarray, surface_keys: np.ndarray,
+                 coarse_level: int, x_crossings: RowCrossings, box_min: np.ndarray, box_max: np.ndarray,
+                 field: SizeField) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may
+    hold inside tets, and in_band (N,) bool: the leaf lies in a band cell.
+
+    band_keys, band_cell_levels: band_cells; surface_keys: the surface cells of coarse_level
+    (sorted), whose size_seeds octants stay undecided.  Leaves outside the band meet no
+    surface: their anchor's winding number classifies them whole, and outside ones are dropped.
+    The size field is that of coarse_level (field.size); coarser leaves follow it up to
+    max_size.
+    """
+    prune = surface_prune(frame, surface_keys, x_crossings)
+    seeds = size_seeds(frame, box_min, box_max, field, prune=prune, finest=coarse_level)
+    keys, levels = balance(np.concatenate([band_keys, seeds[0]]), np.concatenate([band_cell_levels, seeds[1]]))
+    in_band = octants_within(keys, levels, band_keys, band_cell_levels)
+    keep = kept_leaves(frame, keys, levels, in_band, seeds, x_crossings)
     return keys[keep], levels[keep], in_band[keep]

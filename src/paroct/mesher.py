@@ -18,14 +18,14 @@ from .errors import ParoctError
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
-from .band import BandLevels, FineSurfaceCells, band_cells, band_levels, local_leaves, merge_band_levels, no_band_levels
+from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
+                   no_band_levels, surface_prune)
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
-from .octant import MAX_LEVEL, morton_keys, sorted_unique
-from .octree import (FaceBuckets, balance, face_buckets, octant_lattice_anchors, octants_holding, octants_within,
-                     surface_cells)
+from .octant import MAX_LEVEL, ancestor_keys, morton_keys, sorted_lookup, sorted_unique
+from .octree import FaceBuckets, balance, face_buckets, octant_lattice_anchors, surface_cells
 from .quality import summarize, tet_quality
 from .repair import remove_pinches
-from .sizing import OUTSIDE, UNDECIDED, WHOLLY_INSIDE, Region, SizeField, SizeFunction, size_field, size_seeds
+from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
@@ -246,6 +246,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     whole band."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = int(np.floor(np.log2(field.size / floor) + 1e-9))
+    if max_depth < 1:  # min_size leaves no finer level to refine to
+        return None, ""
     notes = [f"at boundary size {field.size:.4g} {lost}"]
     for extra in range(max_depth):
         points, depth = _thin_asks(coarse, walls, max_depth, extra)
@@ -348,7 +350,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
     keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
-    report.leaf_levels = tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
+    report.leaf_levels = _leaf_levels(frame, levels)
     stages.done("octree")
 
     # The band's vertices come first, so its classes, cut edges and warps keep their ids.
@@ -364,7 +366,9 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
 
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     targets[:n_band] = band.targets
-    points, out_tets = _stuff_and_measure(frame, coords, tets, inside, band.cuts, targets, report, stages)
+    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
+    stages.done("stuff")
+    points, out_tets = _repair_and_measure(points, out_tets, inside, targets, report, stages)
     result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
     report.n_vertices = int(result.mesh.points.shape[0])
     lost = _losses(report)
@@ -379,19 +383,11 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     return result, lost, advice, walls
 
 
-def _stuff_and_measure(frame: FatFrame, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
-                       targets: np.ndarray, report: MeshReport, stages: _Stages) -> tuple[np.ndarray, np.ndarray]:
-    """Stuff, repair pinches and fill the report's quality, volume and topology: the mesh
-    (points, tets) with points 0..V-1 the lattice vertices (coords (V, 3)), unused points kept."""
-    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
-    stages.done("stuff")
-    return _repair_and_measure(points, out_tets, inside, targets, report, stages)
-
-
 def _repair_and_measure(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
                         report: MeshReport, stages: _Stages) -> tuple[np.ndarray, np.ndarray]:
-    """Repair pinches and fill the report's quality, volume and topology.  inside, targets
-    (V,): over the lattice vertices, points 0..V-1."""
+    """Repair pinches and fill the report's quality, volume and topology: the mesh (points,
+    tets), unused points kept.  inside, targets (V,): over the lattice vertices, points
+    0..V-1 of the stuffed mesh."""
     core = np.zeros(points.shape[0], dtype=bool)
     core[: inside.shape[0]] = inside & (targets < 0)
     out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
@@ -503,12 +499,12 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     crossings, buckets = framed.crossings, framed.buckets
     report.levels = frame.levels
     bits = rays.snap_bits(frame)
-    band_keys, band_levels_ = band_cells(frame, snapped, faces, bits, buckets, wanted, framed.fine_cells)
-    keys, levels, in_band = local_leaves(frame, band_keys, band_levels_, buckets.keys, coarse_level,
+    band_keys, band_cell_levels = band_cells(frame, snapped, faces, bits, buckets, wanted, framed.fine_cells)
+    keys, levels, in_band = local_leaves(frame, band_keys, band_cell_levels, buckets.keys, coarse_level,
                                          crossings[X_AXIS_DIRECTION], surface.bbox_min - field.size,
                                          surface.bbox_max + field.size, field)
     report.n_leaves = int(keys.shape[0])
-    report.leaf_levels = tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
+    report.leaf_levels = _leaf_levels(frame, levels)
     if window is not None:
         keep = _in_cells(keys, window[0], coarse_level)
         keys, levels, in_band = keys[keep], levels[keep], in_band[keep]
@@ -535,20 +531,19 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # changes level may give tets outside the bound, and then this pass only says where.
     quality = tet_quality(points, out_tets)
     bad = np.nonzero((quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1]))[0]
+    lattice = out_tets[bad].astype(np.int64)
+    is_lattice = lattice < coords.shape[0]  # the bad tets' lattice vertices (every tet has one)
     if window is not None and bad.size:
-        lattice = out_tets[bad].astype(np.int64)
-        is_lattice = lattice < coords.shape[0]
-        some = lattice[np.arange(bad.size), np.argmax(is_lattice, axis=1)][:, None]  # every tet has one
+        some = lattice[np.arange(bad.size), np.argmax(is_lattice, axis=1)][:, None]
         cells = morton_keys((coords[np.where(is_lattice, lattice, some)].reshape(-1, 3)
                              >> (frame.levels - coarse_level)) << (MAX_LEVEL - coarse_level))
-        bad = bad[_in_cells(cells, window[1], coarse_level).reshape(-1, 4).all(axis=1)]
+        measured = _in_cells(cells, window[1], coarse_level).reshape(-1, 4).all(axis=1)
+        bad, lattice, is_lattice = bad[measured], lattice[measured], is_lattice[measured]
     report.bad_tets = int(bad.size)
     asks = no_band_levels(coarse_level)
     if bad.size:
         # Refine the band around each bad tet to the finest level among its lattice vertices'
         # leaves (one level more if they are all alike).
-        lattice = out_tets[bad].astype(np.int64)
-        is_lattice = lattice < coords.shape[0]
         ends = np.where(is_lattice, lattice, 0)
         side = np.where(is_lattice, spacing[ends], 0)
         finest_side = np.where(is_lattice, spacing[ends], np.iinfo(np.int64).max).min(axis=1)
@@ -568,12 +563,15 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     return result, asks
 
 
+def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:
+    """The distinct leaf levels counted from the finest (0 = finest), ascending."""
+    return tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
+
+
 def _in_cells(keys: np.ndarray, cells: np.ndarray, coarse_level: int) -> np.ndarray:
     """Mask (N,) of the octants (keys (N,), of coarse_level or finer) inside one of the coarse
     cells (sorted keys).  A coarser octant counts when its anchor's cell is one of them."""
-    anchors = keys & ~((np.int64(1) << (3 * (MAX_LEVEL - coarse_level))) - 1)
-    at = np.minimum(np.searchsorted(cells, anchors), max(cells.shape[0] - 1, 0))
-    return (cells[at] == anchors) if cells.shape[0] else np.zeros(keys.shape[0], dtype=bool)
+    return sorted_lookup(cells, ancestor_keys(keys, coarse_level))[1]
 
 
 def _band_vertex_ids(vertices: LeafVertices, in_band: np.ndarray) -> np.ndarray:
@@ -627,17 +625,9 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     around = around[(around >= 0).all(axis=1)]
     band = sorted_unique(np.concatenate([cut_keys, morton_keys(around << (MAX_LEVEL - finest))]))
 
-    def classify(octants: np.ndarray, level: int) -> np.ndarray:
-        """size_seeds prune: an octant that holds no surface cell has one class throughout,
-        its anchor's; one that holds a surface cell stays undecided."""
-        found = np.full(octants.shape[0], UNDECIDED, dtype=np.int8)
-        free = np.nonzero(~octants_holding(octants, level, met))[0]
-        inside = rays.winding_numbers(x_crossings, octant_lattice_anchors(octants[free], frame)) > 0
-        found[free] = np.where(inside, WHOLLY_INSIDE, OUTSIDE)
-        return found
-
-    seed_keys, seed_levels, seed_inside = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h,
-                                                     field, prune=classify)
+    seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
+                       prune=surface_prune(frame, met, x_crossings))
+    seed_keys, seed_levels, _ = seeds
     if np.all(seed_levels == finest):  # a uniform lattice: already balanced, nothing to complete
         keys = sorted_unique(np.concatenate([band, seed_keys]))
         levels = np.full(keys.shape[0], finest, dtype=np.int8)
@@ -646,13 +636,8 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
                                np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
     in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
-    in_band[fine] = np.isin(keys[fine], band, assume_unique=True)
-    # Leaves in a wholly inside seed are inside (balance only splits seeds); the rest are asked.
-    inside_keys, inside_levels = seed_keys[seed_inside], seed_levels[seed_inside]
-    order = np.argsort(inside_keys, kind="stable")
-    keep = in_band | octants_within(keys, levels, inside_keys[order], inside_levels[order])
-    ask = np.nonzero(~keep)[0]
-    keep[ask] = rays.winding_numbers(x_crossings, octant_lattice_anchors(keys[ask], frame)) > 0
+    in_band[fine] = sorted_lookup(band, keys[fine])[1]
+    keep = kept_leaves(frame, keys, levels, in_band, seeds, x_crossings)
     return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
 
 

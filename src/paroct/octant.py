@@ -133,3 +133,20 @@ def sorted_unique(values: np.ndarray) -> np.ndarray:
     keep[0] = True
     np.not_equal(s[1:], s[:-1], out=keep[1:])
     return s[keep]
+
+
+def ancestor_keys(keys: np.ndarray, level: int) -> np.ndarray:
+    """Anchor keys (N,) of the ancestors at ``level`` of octants of that level or finer
+    (keys (N,)): the key bits below the level cleared.  An octant of ``level`` is its own."""
+    return np.asarray(keys) & ~((np.int64(1) << (3 * (MAX_LEVEL - level))) - 1)
+
+
+def sorted_lookup(sorted_keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each value sits in sorted_keys (1-D, ascending, distinct): (index (N,) into
+    sorted_keys, valid where found; found (N,) bool).  A binary search, not np.isin's sort of
+    both arrays."""
+    values = np.asarray(values)
+    if sorted_keys.shape[0] == 0:
+        return np.zeros(values.shape[0], dtype=np.int64), np.zeros(values.shape[0], dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_keys, values), sorted_keys.shape[0] - 1)
+    return at, sorted_keys[at] == values
