@@ -46,7 +46,7 @@ def main(argv=None) -> int:
         except ImportError:
             pass
 
-    stages = ["octree", "classify", "emit", "stuff", "repair", "quality"]
+    stages = ["octree", "classify", "emit", "stuff", "warps", "repair", "quality"]
     head = (f"{'model':12s} {'div':>4s} {'tets':>9s} {'verts':>8s} {'sec':>6s} {'Mtet/s':>6s} "
             + " ".join(f"{s[:6]:>6s}" for s in stages)
             + f" {'mindih':>6s} {'maxdih':>6s} {'min3rR':>6s} {'int.dih':>13s} {'lv':>2s} {'fat%':>4s} {'size/req':>8s}"

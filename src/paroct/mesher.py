@@ -26,7 +26,8 @@ from .octree import FaceBuckets, balance, face_buckets, octant_lattice_anchors, 
 from .quality import summarize, tet_quality
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
-from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, stuff, warp_targets
+from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, retarget_warps, stuff,
+                       warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
@@ -443,6 +444,8 @@ STALLED_ROUNDS = 3
 #: (2:1 balance and templates change the leaves up to about two cells away) and measure the
 #: tets two cells less far; the whole band is measured again once those are clean.
 WINDOW_RING = 4
+#: Rounds of retarget_warps (with a fresh stuff and measure each) before the band is refined.
+RETARGET_PASSES = 3
 
 
 def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
@@ -524,13 +527,23 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report, buckets)
     spacing = vertex_spacing(vertices, sides)
     targets = warp_targets(cuts, coords, frame.h, spacing)
-    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets, flat_ok=True)
+    lattice_points = frame.to_space(coords)
+    points, out_tets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
     stages.done("stuff")
 
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
-    # changes level may give tets outside the bound, and then this pass only says where.
-    quality = tet_quality(points, out_tets)
-    bad = np.nonzero((quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1]))[0]
+    # changes level may give tets outside the bound.  Other warps near them mend most; where
+    # they do not, this pass only says where the band must be finer.
+    bad = _outside_bound(points, out_tets)
+    for _ in range(RETARGET_PASSES):
+        if bad.size == 0:
+            break
+        targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets, bad)
+        if not changed:
+            break
+        points, out_tets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
+        bad = _outside_bound(points, out_tets)
+    stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
     is_lattice = lattice < coords.shape[0]  # the bad tets' lattice vertices (every tet has one)
     if window is not None and bad.size:
@@ -561,6 +574,13 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
     report.n_vertices = int(result.mesh.points.shape[0])
     return result, asks
+
+
+def _outside_bound(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Indices of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
+    included: tet_quality gives them 0 and 180 degrees)."""
+    quality = tet_quality(points, tets)
+    return np.nonzero((quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1]))[0]
 
 
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:

@@ -24,6 +24,7 @@ import numba as nb
 import numpy as np
 
 from .frame import LATTICE_TO_SPACE
+from .quality import _COS_HI, _COS_LO, _degrees, _gather, _measure_block
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
@@ -515,32 +516,55 @@ def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touche
     return cyclic
 
 
+@nb.njit(cache=True, inline="always")
+def _position(points, lattice_points, v, reference, i):
+    """Coordinate i of output vertex v: where stuffing put it, or (reference) before the warps,
+    lattice vertices at their lattice points (cut points do not move)."""
+    return lattice_points[v, i] if reference and v < lattice_points.shape[0] else points[v, i]
+
+
+@nb.njit(cache=True, inline="always")
+def _volume6(points, lattice_points, tets, t, reference):
+    """Six times the signed volume of tet t, at the positions _position gives."""
+    p0, p1, p2, p3 = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
+    o0 = _position(points, lattice_points, p0, reference, 0)
+    o1 = _position(points, lattice_points, p0, reference, 1)
+    o2 = _position(points, lattice_points, p0, reference, 2)
+    ax = _position(points, lattice_points, p1, reference, 0) - o0
+    ay = _position(points, lattice_points, p1, reference, 1) - o1
+    az = _position(points, lattice_points, p1, reference, 2) - o2
+    bx = _position(points, lattice_points, p2, reference, 0) - o0
+    by = _position(points, lattice_points, p2, reference, 1) - o1
+    bz = _position(points, lattice_points, p2, reference, 2) - o2
+    cx = _position(points, lattice_points, p3, reference, 0) - o0
+    cy = _position(points, lattice_points, p3, reference, 1) - o1
+    cz = _position(points, lattice_points, p3, reference, 2) - o2
+    return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
+
+
+@nb.njit(cache=True, inline="always")
+def _orient_tet(points, lattice_points, tets, t):
+    """Order tet t (a stencil piece of a lattice tet) so that it is positive before the warps,
+    when it is a proper part of its lattice tet; returns its signed volume after them (six
+    times): not positive means the warps folded or flattened it."""
+    if _volume6(points, lattice_points, tets, t, True) < 0:
+        tmp = tets[t, 2]
+        tets[t, 2] = tets[t, 3]
+        tets[t, 3] = tmp
+    return _volume6(points, lattice_points, tets, t, False)
+
+
 @nb.njit(cache=True, parallel=True)
-def _orient(points, tets, touched):
-    """Swap two vertices of every touched tet of negative volume; returns the number of zero-volume tets.
-    (Untouched lattice tets are positive by construction.)"""
-    flat = 0
+def _orient(points, lattice_points, tets, touched):
+    """Orient every touched tet by its volume before the warps (_orient_tet); returns how many
+    are not positive after them.  (Untouched lattice tets are positive by construction.)
+    Orienting by the warped volume instead would turn a folded tet into a positive one that
+    overlaps its neighbours."""
+    folded = 0
     for t in nb.prange(tets.shape[0]):
-        if not touched[t]:
-            continue
-        p0, p1, p2, p3 = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
-        ax = points[p1, 0] - points[p0, 0]
-        ay = points[p1, 1] - points[p0, 1]
-        az = points[p1, 2] - points[p0, 2]
-        bx = points[p2, 0] - points[p0, 0]
-        by = points[p2, 1] - points[p0, 1]
-        bz = points[p2, 2] - points[p0, 2]
-        cx = points[p3, 0] - points[p0, 0]
-        cy = points[p3, 1] - points[p0, 1]
-        cz = points[p3, 2] - points[p0, 2]
-        vol = ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
-        if vol < 0:
-            tmp = tets[t, 2]
-            tets[t, 2] = tets[t, 3]
-            tets[t, 3] = tmp
-        elif vol == 0:
-            flat += 1
-    return flat
+        if touched[t] and _orient_tet(points, lattice_points, tets, t) <= 0:
+            folded += 1
+    return folded
 
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
@@ -550,9 +574,11 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     lattice_points: (V, 3) space positions of the lattice vertices; coords: (V, 3) their
     lattice coordinates; tets: (T, 4) lattice tets; inside: (V,) class of each vertex;
     cuts: the cut edges of these tets; targets: warp_targets(cuts, coords, h).
-    Points V.. V+E-1 are the cut points (only those still on a +/- edge are used).  A flat
-    tet is a bug on a one-level band (AssertionError); flat_ok keeps it, for a band that
-    changes level, whose caller measures every tet and refines where one is bad.
+    Points V.. V+E-1 are the cut points (only those still on a +/- edge are used).  Every tet
+    is oriented as its piece of the lattice tet is before the warps, so one the warps fold
+    has negative volume.  A flat or folded tet is a bug on a one-level band (AssertionError);
+    flat_ok keeps it, for a band that changes level, whose caller measures every tet and
+    mends or refines where one is bad (retarget_warps).
     """
     n_lattice = lattice_points.shape[0]
     warped = targets >= 0
@@ -567,7 +593,154 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     touched = np.empty(out.shape[0], dtype=np.bool_)
     if _stencils(tets, signs, coords, cuts.table, n_lattice, PRISM_TETS, offsets, out, touched):
         raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
-    flat = _orient(points, out, touched)
-    if flat and not flat_ok:
-        raise AssertionError(f"stuffing produced {flat} flat tets")
+    folded = _orient(points, lattice_points, out, touched)
+    if folded and not flat_ok:
+        raise AssertionError(f"stuffing produced {folded} flat or folded tets")
     return points, out
+
+
+
+@nb.njit(cache=True)
+def _rows_touching(tets, marked):
+    """Indices of the rows of tets (T, 4) with a marked vertex."""
+    n = 0
+    for t in range(tets.shape[0]):
+        n += marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]
+    out = np.empty(n, dtype=np.int64)
+    n = 0
+    for t in range(tets.shape[0]):
+        if marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]:
+            out[n] = t
+            n += 1
+    return out
+
+
+@nb.njit(cache=True)
+def _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi):
+    """(worst violation of [lo, hi] in degrees, smallest dihedral angle) over the stencil tets
+    of the lattice tets star, stuffed with these signs and points (lattice vertices where the
+    warps put them, then the cut points); a tet folded or flattened by the warps (see
+    _orient_tet) or a cyclic prism violates by 180.  Calls _stencils rather than inlining
+    _stencil_tet again, which would cost most of a minute of compile time."""
+    local = tets[star]
+    offsets = np.zeros(star.shape[0] + 1, dtype=np.int64)
+    scratch = np.empty((3, 4), dtype=np.int64)
+    for t in range(star.shape[0]):
+        n_p, n_z, n_m = _sign_pattern(local, t, signs, scratch[0], scratch[1], scratch[2])
+        offsets[t + 1] = offsets[t] + _stencil_size(n_p, n_z, n_m)
+    out = np.empty((offsets[-1], 4), dtype=np.int32)
+    touched = np.empty(out.shape[0], dtype=np.bool_)
+    if _stencils(local, signs, coords, table, lattice_points.shape[0], prism, offsets, out, touched):
+        return 180.0, 0.0
+    worst = 0.0
+    smallest = 180.0
+    corners = np.empty((12, 1))
+    measured = np.empty((4, 1))
+    for k in range(out.shape[0]):
+        if not touched[k]:
+            continue  # a whole lattice tet no cut or warp touches
+        if _orient_tet(points, lattice_points, out, k) <= 0:
+            return 180.0, 0.0
+        _gather(points, out, k, 1, corners)
+        _measure_block(corners, 1, measured)
+        small = _degrees(measured[_COS_HI, 0])
+        worst = max(worst, lo - small, _degrees(measured[_COS_LO, 0]) - hi)
+        smallest = min(smallest, small)
+    return worst, smallest
+
+
+@nb.njit(cache=True)
+def _set_warp(v, e, signs, targets, points, lattice_points, inside):
+    """Warp lattice vertex v onto the cut point of cut edge e, or (e = -1) put it back."""
+    n_lattice = lattice_points.shape[0]
+    targets[v] = e
+    signs[v] = 0 if e >= 0 else (1 if inside[v] else -1)
+    for c in range(3):
+        points[v, c] = points[n_lattice + e, c] if e >= 0 else lattice_points[v, c]
+
+
+@nb.njit(cache=True)
+def _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points,
+              inside, coords, table, prism, lo, hi, sweeps):
+    """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi],
+    the warp (none, or onto the cut point of one of its cut edges) that brings the star's
+    worst violation lowest, ties to the largest smallest angle; sweeps until nothing changes.
+    Returns how many warps changed."""
+    changed = 0
+    for _ in range(sweeps):
+        moved = 0
+        for i in range(vertices.shape[0]):
+            v = vertices[i]
+            star = stars[star_first[i]:star_first[i + 1]]
+            worst, smallest = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+            if worst <= 0:
+                continue
+            current = targets[v]
+            best, best_smallest, best_target = worst, smallest, current
+            for j in range(option_first[i], option_first[i + 1] + 1):
+                e = options[j] if j < option_first[i + 1] else -1
+                if e == current:
+                    continue
+                _set_warp(v, e, signs, targets, points, lattice_points, inside)
+                w, s = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+                if w < best or (w == best and s > best_smallest):
+                    best, best_smallest, best_target = w, s, e
+            _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
+            if best_target != current:
+                moved += 1
+        changed += moved
+        if moved == 0:
+            break
+    return changed
+
+
+#: Passes over the candidate vertices retarget_warps makes at most.
+RETARGET_SWEEPS = 4
+
+
+def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
+                   cuts: CutEdges, targets: np.ndarray, bad: np.ndarray) -> tuple[np.ndarray, int]:
+    """Mend stuffed tets outside DIHEDRAL_BOUND by choosing other warps near them.
+
+    Where the band changes level the Labelle-Shewchuk warp rule proves nothing, and a few
+    stuffed tets fall outside the bound (docs/design.md, "Thin features").  A warp moves one
+    lattice vertex and changes only the stencils of the lattice tets around it (its star),
+    so each vertex of the lattice tets that gave the bad tets may instead warp onto the cut
+    point of any of its cut edges, or not at all; the choice that leaves its star's worst
+    angle least outside the bound is kept (_retarget).  Tets the warps would fold count as
+    outside.  Arguments as for stuff, and bad: indices of the bad tets in stuff's output.
+    Returns (new warp targets (V,), how many changed); the caller stuffs again and measures:
+    this is a search, it certifies nothing.
+    """
+    n_lattice = lattice_points.shape[0]
+    tets = np.ascontiguousarray(tets)
+    targets = targets.copy()
+    warped = targets >= 0
+    signs = np.where(inside, 1, -1).astype(np.int8)
+    signs[warped] = 0
+    offsets = np.cumsum(_stencil_counts(tets, signs))
+    owners = np.searchsorted(offsets, bad, side="right")  # the lattice tet each came from
+    vertices = np.unique(tets[owners].ravel()).astype(np.int64)
+    marked = np.zeros(n_lattice, dtype=np.bool_)
+    marked[vertices] = True
+    rows = _rows_touching(tets, marked)
+    # (vertex, star tet) pairs and (vertex, cut edge) pairs, grouped by the vertex's rank.
+    corner = tets[rows].astype(np.int64).ravel()
+    keep = marked[corner]
+    rank = np.searchsorted(vertices, corner[keep])
+    order = np.argsort(rank, kind="stable")
+    stars = np.repeat(rows, 4)[keep][order]
+    star_first = np.searchsorted(rank[order], np.arange(vertices.shape[0] + 1))
+    ends = np.concatenate([cuts.starts, cuts.ends])
+    keep = marked[ends]
+    rank = np.searchsorted(vertices, ends[keep])
+    order = np.argsort(rank, kind="stable")
+    options = np.tile(np.arange(cuts.starts.shape[0], dtype=np.int64), 2)[keep][order]
+    option_first = np.searchsorted(rank[order], np.arange(vertices.shape[0] + 1))
+
+    points = np.concatenate([lattice_points, cuts.points])
+    points[:n_lattice][warped] = cuts.points[targets[warped]]
+    changed = _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points,
+                        lattice_points, inside, coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0],
+                        DIHEDRAL_BOUND[1], RETARGET_SWEEPS)
+    return targets, int(changed)
