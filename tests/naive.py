@@ -259,3 +259,19 @@ def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
                             work.append(w)
                             queued.add(w)
     return alive
+
+
+def star_violation(lattice_points, coords, tets, inside, cuts, targets, star, bound) -> float:
+    """Worst violation of bound (degrees) over the tets stuffing gives the lattice tets star
+    (indices into tets) with these warps, by stuffing just them and measuring every tet; 180
+    if one is folded or flat (an angle of 0 or 180 degrees).  The twin of stuffing._star_score."""
+    from paroct.quality import tet_quality
+    from paroct.stuffing import stuff
+
+    points, out = stuff(lattice_points, coords, tets[star], inside, cuts, targets, flat_ok=True)
+    q = tet_quality(points, out)
+    if np.any(q.volume <= 0) or np.any(q.min_dihedral <= 0) or np.any(q.max_dihedral >= 180):
+        return 180.0
+    if out.shape[0] == 0:
+        return 0.0
+    return float(max(0.0, (bound[0] - q.min_dihedral).max(), (q.max_dihedral - bound[1]).max()))

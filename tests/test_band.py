@@ -5,7 +5,7 @@ import manifold3d
 import numpy as np
 import pytest
 
-from paroct import octant
+from paroct import mesher, octant
 from paroct.band import FineSurfaceCells, band_cells, band_levels, merge_band_levels
 from paroct.check import check_mesh, distances_to_triangles
 from paroct.frame import X_AXIS_DIRECTION, fat_frame
@@ -134,6 +134,8 @@ def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size):
     result = mesh(surface, size=size)
     rep = result.report
     assert rep.size < size / 2 and any("only near" in note for note in rep.notes) and not rep.warnings
+    # Other warps mend the tets the level changes put outside the bound: no second round.
+    assert any(note.endswith("in 1 measure-and-refine round") for note in rep.notes)
     check = check_mesh(result.mesh.points, result.mesh.tets, surface)
     assert check.ok, check.problems()
     assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
@@ -142,3 +144,17 @@ def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size):
     assert 30 <= rep.interior_min_dihedral and rep.interior_max_dihedral <= 135
     everywhere = mesh(surface, size=rep.size, max_size=rep.max_size, thin_features=False)
     assert rep.n_tets < 0.6 * everywhere.report.n_tets
+
+
+def test_without_other_warps_the_rounds_refine_until_the_bound_holds(monkeypatch):
+    """With retarget_warps off, tets outside the bound are left to the rounds, which refine the
+    band around them (at size 0.07 the slot block needs several) until none is left."""
+    monkeypatch.setattr(mesher, "RETARGET_PASSES", 0)
+    surface = load_surface(_slot_block())
+    result = mesh(surface, size=0.07)
+    rounds = [note for note in result.report.notes if "measure-and-refine round" in note]
+    assert rounds and not rounds[-1].endswith("in 1 measure-and-refine round")
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)

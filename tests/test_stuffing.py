@@ -14,9 +14,11 @@ import pytest
 from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.quality import tet_quality
-from paroct.stuffing import CutEdges, collect_cut_edges, mixed_tets, stuff, warp_targets
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _star_score, collect_cut_edges, mixed_tets, retarget_warps,
+                              stuff, warp_targets)
 from paroct.topology import match_faces
 
+from .naive import star_violation
 from .test_grading import _random_balanced_tree
 
 #: Labelle & Shewchuk's bound for the BCC lattice, degrees.
@@ -39,11 +41,11 @@ def _clipped_volume(points, tets, phi):
     return float((vol * frac).sum())
 
 
-def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
-    """Stuff the tets (lattice coords (V, 3), tets (M, 4)) against the level set phi (V,) > 0,
-    the cut of edge (start, end) at fracs_of(x, starts, ends); warps by warp_targets (spacing:
-    each vertex's finest leaf side, default 1), never for vertices on the hull of coords.
-    Returns (lattice points in space, output points, output tets)."""
+def _cuts_and_warps(coords, tets, phi, fracs_of, warp, spacing=None):
+    """What stuffing the tets (lattice coords (V, 3), tets (M, 4)) against the level set
+    phi (V,) > 0 takes: (lattice points in space, inside, cut edges, warp targets), the cut of
+    edge (start, end) at fracs_of(x, starts, ends); warps by warp_targets (spacing: each
+    vertex's finest leaf side, default 1), never for vertices on the hull of coords."""
     x = coords @ LATTICE_TO_SPACE.T
     inside = phi > 0
     starts, ends, _, *table = collect_cut_edges(mixed_tets(tets, inside), inside, coords)
@@ -53,7 +55,18 @@ def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     if warp:
         targets = warp_targets(cuts, coords, 1.0, spacing)
-        targets[((coords == coords.min(axis=0)) | (coords == coords.max(axis=0))).any(axis=1)] = -1
+        targets[_on_box(coords)] = -1
+    return x, inside, cuts, targets
+
+
+def _on_box(coords):
+    """Mask (V,) of the lattice points on the faces of their bounding box."""
+    return ((coords == coords.min(axis=0)) | (coords == coords.max(axis=0))).any(axis=1)
+
+
+def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
+    """Stuff as _cuts_and_warps sets up; returns (lattice points in space, output points, output tets)."""
+    x, inside, cuts, targets = _cuts_and_warps(coords, tets, phi, fracs_of, warp, spacing)
     points, out = stuff(x, coords, tets, inside, cuts, targets)
     return x, points, out
 
@@ -187,3 +200,111 @@ def test_quad_rules_never_cycle_on_lattice_and_template_tets(seed):
         phi[copies[:, outside]] = -1.0
         x, points, out = _stuff(copy_coords, copies, phi, lambda x, s, e: np.full(s.shape[0], 0.5), warp=False)
         assert out.shape[0] == 3 * n
+
+
+def test_stuff_orients_by_the_volume_before_the_warps():
+    """A vertex warped onto a far cut point folds tets of its star: stuff orients each tet as
+    its piece of the lattice tet lies before the warps, so the folded ones come out negative
+    (and are refused unless flat_ok), never turned over to overlap their neighbours."""
+    n = 6
+    anchors = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    coords, tets = lattice.leaf_tets(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    phi, fracs = _plane(coords, np.array([0.0, 0.0, 1.0]), float((coords @ LATTICE_TO_SPACE.T)[:, 2].mean()) + 0.1)
+    x, inside, cuts, targets = _cuts_and_warps(coords, tets, phi, fracs, warp=True)
+    assert np.all(tet_quality(*stuff(x, coords, tets, inside, cuts, targets)).volume > 0)
+    v = int(np.argmin(np.linalg.norm(x - x.mean(axis=0), axis=1)))  # a vertex in the middle...
+    targets[v] = int(np.argmax(np.linalg.norm(cuts.points - x[v], axis=1)))  # ...onto the farthest cut point
+    with pytest.raises(AssertionError, match="folded"):
+        stuff(x, coords, tets, inside, cuts, targets)
+    points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+    folded = tet_quality(points, out).volume <= 0
+    assert folded.any() and np.all(np.any(out[folded] == v, axis=1))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_star_score_is_the_worst_violation_of_the_stuffed_star(seed):
+    """_star_score (the measure retarget_warps minimises) against stuffing the star alone and
+    measuring every tet (tests/naive.py), for random vertices of graded octrees cut by planes
+    and each warp they may take (none, or onto the cut point of one of their edges whose other
+    end is not warped there too: that would collapse the edge)."""
+    rng = np.random.default_rng(2000 + seed)
+    anchors, sides = _random_balanced_tree(seed, 4)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, np.ascontiguousarray(lattice.graded_tets(vertices))
+    spacing = lattice.vertex_spacing(vertices, sides)
+    checked = 0
+    for _ in range(4):
+        normal, offset = _random_plane(rng, coords)
+        x, inside, cuts, targets = _cuts_and_warps(coords, tets, *_plane(coords, normal, offset), True, spacing)
+        for v in rng.choice(np.unique(np.concatenate([cuts.starts, cuts.ends])), 8):
+            star = np.nonzero(np.any(tets == v, axis=1))[0]
+            own = np.nonzero((cuts.starts == v) | (cuts.ends == v))[0]
+            other = np.where(cuts.starts[own] == v, cuts.ends[own], cuts.starts[own])
+            for e in np.append(own[targets[other] != own], -1):
+                trial = targets.copy()
+                trial[v] = e
+                points = np.concatenate([x, cuts.points])
+                points[: x.shape[0]][trial >= 0] = cuts.points[trial[trial >= 0]]
+                signs = np.where(inside, 1, -1).astype(np.int8)
+                signs[trial >= 0] = 0
+                worst, _ = _star_score(star, tets, signs, points, x, coords, cuts.table, PRISM_TETS, *DIHEDRAL_BOUND)
+                naive = star_violation(x, coords, tets, inside, cuts, trial, star, DIHEDRAL_BOUND)
+                assert worst == pytest.approx(naive, abs=1e-9)
+                checked += 1
+    assert checked >= 64
+
+
+def _sphere_cuts(seed, k):
+    """Sphere k of seed cutting a random balanced octree of 4 or 5 levels, warped by warp_targets."""
+    rng = np.random.default_rng([seed, k])
+    anchors, sides = _random_balanced_tree(seed, 4 + seed % 2)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
+    x = coords @ LATTICE_TO_SPACE.T
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    centre = rng.uniform(lo + 0.25 * (hi - lo), hi - 0.25 * (hi - lo))
+    radius = rng.uniform(1.0, 0.4 * (hi - lo).min())
+    phi, fracs = _sphere(coords, centre, radius)
+    return coords, tets, (centre, radius), _cuts_and_warps(coords, tets, phi, fracs, True, lattice.vertex_spacing(vertices, sides))
+
+
+def _violations(points, out, coords):
+    """Violation of DIHEDRAL_BOUND per output tet (180 if folded), 0 for tets with a vertex on
+    the block's faces (their warps see only part of a lattice)."""
+    q = tet_quality(points, out)
+    worst = np.maximum(DIHEDRAL_BOUND[0] - q.min_dihedral, q.max_dihedral - DIHEDRAL_BOUND[1])
+    worst = np.where(q.volume <= 0, 180.0, np.maximum(worst, 0.0))
+    lattice_ids = np.where(out < coords.shape[0], out, 0)
+    return np.where(np.any((out < coords.shape[0]) & _on_box(coords)[lattice_ids], axis=1), 0.0, worst)
+
+
+def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_worst():
+    """Spheres through random balanced octrees, where the band changes level everywhere: the
+    warps of warp_targets leave tets outside [10.7, 164.8] (tets at the block's faces, whose
+    warps see part of a lattice, not counted); retarget_warps must mend at least nine in ten
+    and never raise the worst violation (an accepted change lowers the worst of its vertex's
+    star, and only that star changes), keep every warped vertex on a cut point of one of its
+    own edges, and keep the mesh conforming with its boundary on the sphere."""
+    before = after = 0
+    for seed in range(8):
+        for k in range(10):
+            coords, tets, (centre, radius), (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+            points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            worst = _violations(points, out, coords)
+            if not worst.any():
+                continue
+            new, changed = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0])
+            assert changed == np.count_nonzero(new != targets)
+            points, out = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+            mended = _violations(points, out, coords)
+            assert mended.max() <= worst.max() + 1e-9
+            before, after = before + np.count_nonzero(worst), after + np.count_nonzero(mended)
+            warped = np.nonzero(new >= 0)[0]
+            assert np.all((cuts.starts[new[warped]] == warped) | (cuts.ends[new[warped]] == warped))
+            # Conforming (each face shared by two tets or on the boundary), and the boundary away
+            # from the block's faces (whose vertices may warp too) on the sphere.
+            tri = _boundary_triangles(points, out)
+            u = tri @ np.linalg.inv(LATTICE_TO_SPACE).T
+            near_box = np.any((np.abs(u - coords.min(axis=0)) < 1e-9) | (np.abs(u - coords.max(axis=0)) < 1e-9), axis=(1, 2))
+            assert np.allclose(np.linalg.norm(tri[~near_box] - centre, axis=2), radius)
+    assert before > 100 and after <= before / 10

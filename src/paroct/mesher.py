@@ -180,8 +180,8 @@ def mesh(
     thin_features: when the mesh loses topology (boundary components, genus) or more than 1 %
     of the volume, the solid is meshed again with the boundary refined only near the walls and
     gaps thinner than 2 * size, to two element layers across each (down to min_size, default
-    size / 8), every tet measured and the band refined around any outside [10.7, 164.8]
-    degrees; if that does not keep the solid, the whole boundary size shrinks by halves
+    size / 8), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
+    and the band refined where they do not mend it; if that does not keep the solid, the whole boundary size shrinks by halves
     instead, as far as max_memory allows.  The report's notes say what was done.  False keeps
     size and only warns.  max_memory: bytes the run may use (default: the machine's
     available memory); a size that would need more is refused before any work.  progress:
@@ -240,7 +240,7 @@ def mesh(
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
                   progress: Callable[[str], None] | None, stage_seconds: dict) -> tuple[MeshResult | None, str]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
-    down to ``floor``), measure and refine until every tet is within DIHEDRAL_BOUND, and one
+    down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and one
     level more while the mesh still loses topology or volume.  Returns the result, or None and
     why that did not succeed (no thin place found: ''; the floor or the memory budget reached;
     the rounds stopped finding fewer tets outside the bound): then the caller refines the
@@ -491,8 +491,9 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
                   report: MeshReport, progress: Callable[[str], None] | None,
                   window: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[MeshResult | None, BandLevels]:
     """One pass with a band refined where ``wanted`` asks (framed.frame: the finest frame,
-    whose level framed.coarse_level has long edge field.size).  Returns the result, or None if
-    a tet falls outside stuffing.DIHEDRAL_BOUND, and then where the band must be finer.
+    whose level framed.coarse_level has long edge field.size).  Tets outside
+    stuffing.DIHEDRAL_BOUND are mended by other warps (retarget_warps) where they can be.
+    Returns the result, or None if a tet stays outside, and then where the band must be finer.
 
     window: (outer, inner) sorted keys of coarse cells.  Then the pass only checks: it stuffs
     the leaves in the outer cells and measures the tets whose lattice vertices all lie in the

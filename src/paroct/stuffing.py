@@ -620,7 +620,7 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
     """(worst violation of [lo, hi] in degrees, smallest dihedral angle) over the stencil tets
     of the lattice tets star, stuffed with these signs and points (lattice vertices where the
     warps put them, then the cut points); a tet folded or flattened by the warps (see
-    _orient_tet) or a cyclic prism violates by 180.  Calls _stencils rather than inlining
+    _orient_tet; or with an angle of 0 or 180 degrees) or a cyclic prism violates by 180.  Calls _stencils rather than inlining
     _stencil_tet again, which would cost most of a minute of compile time."""
     local = tets[star]
     offsets = np.zeros(star.shape[0] + 1, dtype=np.int64)
@@ -644,7 +644,10 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
         _gather(points, out, k, 1, corners)
         _measure_block(corners, 1, measured)
         small = _degrees(measured[_COS_HI, 0])
-        worst = max(worst, lo - small, _degrees(measured[_COS_LO, 0]) - hi)
+        large = _degrees(measured[_COS_LO, 0])
+        if small <= 0.0 or large >= 180.0:
+            return 180.0, 0.0  # flat to rounding
+        worst = max(worst, lo - small, large - hi)
         smallest = min(smallest, small)
     return worst, smallest
 
@@ -709,11 +712,12 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     point of any of its cut edges, or not at all; the choice that leaves its star's worst
     angle least outside the bound is kept (_retarget).  Tets the warps would fold count as
     outside.  Arguments as for stuff, and bad: indices of the bad tets in stuff's output.
-    Returns (new warp targets (V,), how many changed); the caller stuffs again and measures:
-    this is a search, it certifies nothing.
+    Returns (new warp targets (V,), how many vertices warp elsewhere); the caller stuffs again
+    and measures: this is a search, it certifies nothing.
     """
     n_lattice = lattice_points.shape[0]
     tets = np.ascontiguousarray(tets)
+    before = targets
     targets = targets.copy()
     warped = targets >= 0
     signs = np.where(inside, 1, -1).astype(np.int8)
@@ -740,7 +744,6 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
 
     points = np.concatenate([lattice_points, cuts.points])
     points[:n_lattice][warped] = cuts.points[targets[warped]]
-    changed = _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points,
-                        lattice_points, inside, coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0],
-                        DIHEDRAL_BOUND[1], RETARGET_SWEEPS)
-    return targets, int(changed)
+    _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points, inside,
+              coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], RETARGET_SWEEPS)
+    return targets, int(np.count_nonzero(targets != before))
