@@ -24,7 +24,7 @@ import numba as nb
 import numpy as np
 
 from .frame import LATTICE_TO_SPACE
-from .quality import _COS_HI, _COS_LO, _degrees, _gather, _measure_block
+from .quality import _COS_HI, _COS_LO, _RATIO, _degrees, _gather, _measure_block
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
@@ -617,7 +617,7 @@ def _rows_touching(tets, marked):
 
 @nb.njit(cache=True)
 def _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi):
-    """(worst violation of [lo, hi] in degrees, smallest dihedral angle) over the stencil tets
+    """(worst violation of [lo, hi] in degrees, smallest 3r/R) over the stencil tets
     of the lattice tets star, stuffed with these signs and points (lattice vertices where the
     warps put them, then the cut points); a tet folded or flattened by the warps (see
     _orient_tet; or with an angle of 0 or 180 degrees) or a cyclic prism violates by 180.  Calls _stencils rather than inlining
@@ -633,7 +633,7 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
     if _stencils(local, signs, coords, table, lattice_points.shape[0], prism, offsets, out, touched):
         return 180.0, 0.0
     worst = 0.0
-    smallest = 180.0
+    thinnest = 1.0
     corners = np.empty((12, 1))
     measured = np.empty((4, 1))
     for k in range(out.shape[0]):
@@ -648,8 +648,8 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
         if small <= 0.0 or large >= 180.0:
             return 180.0, 0.0  # flat to rounding
         worst = max(worst, lo - small, large - hi)
-        smallest = min(smallest, small)
-    return worst, smallest
+        thinnest = min(thinnest, measured[_RATIO, 0])
+    return worst, thinnest
 
 
 @nb.njit(cache=True)
@@ -667,7 +667,8 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
               inside, coords, table, prism, lo, hi, sweeps):
     """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi],
     the warp (none, or onto the cut point of one of its cut edges) that brings the star's
-    worst violation lowest, ties to the largest smallest angle; sweeps until nothing changes.
+    worst violation lowest, ties to the largest smallest 3r/R (no needles: their angles can be
+    good); sweeps until nothing changes.
     Returns how many warps changed."""
     changed = 0
     for _ in range(sweeps):
@@ -675,19 +676,19 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
         for i in range(vertices.shape[0]):
             v = vertices[i]
             star = stars[star_first[i]:star_first[i + 1]]
-            worst, smallest = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+            worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
             if worst <= 0:
                 continue
             current = targets[v]
-            best, best_smallest, best_target = worst, smallest, current
+            best, best_thinnest, best_target = worst, thinnest, current
             for j in range(option_first[i], option_first[i + 1] + 1):
                 e = options[j] if j < option_first[i + 1] else -1
                 if e == current:
                     continue
                 _set_warp(v, e, signs, targets, points, lattice_points, inside)
-                w, s = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
-                if w < best or (w == best and s > best_smallest):
-                    best, best_smallest, best_target = w, s, e
+                w, r = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+                if w < best or (w == best and r > best_thinnest):
+                    best, best_thinnest, best_target = w, r, e
             _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
             if best_target != current:
                 moved += 1
