@@ -181,11 +181,11 @@ def mesh(
     of the volume, the solid is meshed again with the boundary refined only near the walls and
     gaps thinner than 2 * size, to two element layers across each (down to min_size, default
     size / 8), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
-    and the band refined where they do not mend it; if that does not keep the solid, the whole boundary size shrinks by halves
-    instead, as far as max_memory allows.  The report's notes say what was done.  False keeps
-    size and only warns.  max_memory: bytes the run may use (default: the machine's
-    available memory); a size that would need more is refused before any work.  progress:
-    called with each stage's name when it ends.
+    and the band refined where they do not mend it; if that does not keep the solid, the
+    whole boundary size shrinks by halves instead, as far as max_memory allows.  The report's
+    notes say what was done.  False keeps size and only warns.  max_memory: bytes the run
+    may use (default: the machine's available memory); a size that would need more is
+    refused before any work.  progress: called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
@@ -240,8 +240,8 @@ def mesh(
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
                   progress: Callable[[str], None] | None, stage_seconds: dict) -> tuple[MeshResult | None, str]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
-    down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and one
-    level more while the mesh still loses topology or volume.  Returns the result, or None and
+    down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
+    one level more while the mesh still loses topology or volume.  Returns the result, or None and
     why that did not succeed (no thin place found: ''; the floor or the memory budget reached;
     the rounds stopped finding fewer tets outside the bound): then the caller refines the
     whole band."""
