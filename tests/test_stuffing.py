@@ -14,8 +14,8 @@ import pytest
 from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _star_score, collect_cut_edges, mixed_tets, retarget_warps,
-                              stuff, warp_targets)
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _star_score, _warped, collect_cut_edges, mixed_tets,
+                              retarget_warps, stuff, warp_targets)
 from paroct.topology import match_faces
 
 from .naive import star_violation
@@ -243,10 +243,7 @@ def test_star_score_is_the_worst_violation_of_the_stuffed_star(seed):
             for e in np.append(own[targets[other] != own], -1):
                 trial = targets.copy()
                 trial[v] = e
-                points = np.concatenate([x, cuts.points])
-                points[: x.shape[0]][trial >= 0] = cuts.points[trial[trial >= 0]]
-                signs = np.where(inside, 1, -1).astype(np.int8)
-                signs[trial >= 0] = 0
+                points, signs = _warped(x, inside, cuts, trial)
                 worst, _ = _star_score(star, tets, signs, points, x, coords, cuts.table, PRISM_TETS, *DIHEDRAL_BOUND)
                 naive = star_violation(x, coords, tets, inside, cuts, trial, star, DIHEDRAL_BOUND)
                 assert worst == pytest.approx(naive, abs=1e-9)

@@ -567,6 +567,18 @@ def _orient(points, lattice_points, tets, touched):
     return folded
 
 
+def _warped(lattice_points: np.ndarray, inside: np.ndarray, cuts: CutEdges,
+            targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points (V + E, 3): the lattice vertices where the warps put them, then the cut points;
+    and signs (V,) int8: +1 inside, -1 outside, 0 warped onto the surface."""
+    warped = targets >= 0
+    points = np.concatenate([lattice_points, cuts.points])
+    points[: lattice_points.shape[0]][warped] = cuts.points[targets[warped]]
+    signs = np.where(inside, 1, -1).astype(np.int8)
+    signs[warped] = 0
+    return points, signs
+
+
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
           cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points kept.
@@ -581,11 +593,7 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     mends or refines where one is bad (retarget_warps).
     """
     n_lattice = lattice_points.shape[0]
-    warped = targets >= 0
-    points = np.concatenate([lattice_points, cuts.points])
-    points[:n_lattice][warped] = cuts.points[targets[warped]]
-    signs = np.where(inside, 1, -1).astype(np.int8)
-    signs[warped] = 0
+    points, signs = _warped(lattice_points, inside, cuts, targets)
     tets = np.ascontiguousarray(tets)
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
     np.cumsum(_stencil_counts(tets, signs), out=offsets[1:])
@@ -597,7 +605,6 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     if folded and not flat_ok:
         raise AssertionError(f"stuffing produced {folded} flat or folded tets")
     return points, out
-
 
 
 @nb.njit(cache=True)
@@ -620,8 +627,9 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
     """(worst violation of [lo, hi] in degrees, smallest 3r/R) over the stencil tets
     of the lattice tets star, stuffed with these signs and points (lattice vertices where the
     warps put them, then the cut points); a tet folded or flattened by the warps (see
-    _orient_tet; or with an angle of 0 or 180 degrees) or a cyclic prism violates by 180.  Calls _stencils rather than inlining
-    _stencil_tet again, which would cost most of a minute of compile time."""
+    _orient_tet; or with an angle of 0 or 180 degrees) or a cyclic prism violates by 180.
+    Calls _stencils rather than inlining _stencil_tet again, which would cost most of a
+    minute of compile time."""
     local = tets[star]
     offsets = np.zeros(star.shape[0] + 1, dtype=np.int64)
     scratch = np.empty((3, 4), dtype=np.int64)
@@ -668,9 +676,7 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
     """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi],
     the warp (none, or onto the cut point of one of its cut edges) that brings the star's
     worst violation lowest, ties to the largest smallest 3r/R (no needles: their angles can be
-    good); sweeps until nothing changes.
-    Returns how many warps changed."""
-    changed = 0
+    good); sweeps until nothing changes.  Changes signs, targets and points in place."""
     for _ in range(sweeps):
         moved = 0
         for i in range(vertices.shape[0]):
@@ -692,10 +698,18 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
             _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
             if best_target != current:
                 moved += 1
-        changed += moved
         if moved == 0:
             break
-    return changed
+
+
+def _group_by_vertex(vertices: np.ndarray, marked: np.ndarray, owners: np.ndarray,
+                     items: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The items (N,) whose owner (N,) vertex is marked, grouped by that vertex's rank in
+    vertices (sorted): group i is grouped[first[i]:first[i + 1]].  Returns (first, grouped)."""
+    keep = marked[owners]
+    rank = np.searchsorted(vertices, owners[keep])
+    order = np.argsort(rank, kind="stable")
+    return np.searchsorted(rank[order], np.arange(vertices.shape[0] + 1)), items[keep][order]
 
 
 #: Passes over the candidate vertices retarget_warps makes at most.
@@ -716,35 +730,19 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     Returns (new warp targets (V,), how many vertices warp elsewhere); the caller stuffs again
     and measures: this is a search, it certifies nothing.
     """
-    n_lattice = lattice_points.shape[0]
     tets = np.ascontiguousarray(tets)
-    before = targets
-    targets = targets.copy()
-    warped = targets >= 0
-    signs = np.where(inside, 1, -1).astype(np.int8)
-    signs[warped] = 0
+    new = targets.copy()
+    points, signs = _warped(lattice_points, inside, cuts, new)
     offsets = np.cumsum(_stencil_counts(tets, signs))
     owners = np.searchsorted(offsets, bad, side="right")  # the lattice tet each came from
     vertices = np.unique(tets[owners].ravel()).astype(np.int64)
-    marked = np.zeros(n_lattice, dtype=np.bool_)
+    marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
     rows = _rows_touching(tets, marked)
-    # (vertex, star tet) pairs and (vertex, cut edge) pairs, grouped by the vertex's rank.
-    corner = tets[rows].astype(np.int64).ravel()
-    keep = marked[corner]
-    rank = np.searchsorted(vertices, corner[keep])
-    order = np.argsort(rank, kind="stable")
-    stars = np.repeat(rows, 4)[keep][order]
-    star_first = np.searchsorted(rank[order], np.arange(vertices.shape[0] + 1))
-    ends = np.concatenate([cuts.starts, cuts.ends])
-    keep = marked[ends]
-    rank = np.searchsorted(vertices, ends[keep])
-    order = np.argsort(rank, kind="stable")
-    options = np.tile(np.arange(cuts.starts.shape[0], dtype=np.int64), 2)[keep][order]
-    option_first = np.searchsorted(rank[order], np.arange(vertices.shape[0] + 1))
-
-    points = np.concatenate([lattice_points, cuts.points])
-    points[:n_lattice][warped] = cuts.points[targets[warped]]
-    _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points, inside,
+    star_first, stars = _group_by_vertex(vertices, marked, tets[rows].astype(np.int64).ravel(), np.repeat(rows, 4))
+    n_cuts = cuts.starts.shape[0]
+    option_first, options = _group_by_vertex(vertices, marked, np.concatenate([cuts.starts, cuts.ends]),
+                                             np.tile(np.arange(n_cuts, dtype=np.int64), 2))
+    _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points, inside,
               coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], RETARGET_SWEEPS)
-    return targets, int(np.count_nonzero(targets != before))
+    return new, int(np.count_nonzero(new != targets))
