@@ -250,6 +250,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     if max_depth < 1:  # min_size leaves no finer level to refine to
         return None, ""
     notes = [f"at boundary size {field.size:.4g} {lost}"]
+    framed = None
     for extra in range(max_depth):
         points, depth = _thin_asks(coarse, walls, max_depth, extra)
         if depth.size == 0:
@@ -258,7 +259,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         if frame.levels > MAX_FRAME_LEVELS:
             return None, f"a frame of {frame.levels} levels is too deep"
         wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
-        framed = FramedSurface.build(surface, frame, coarse.levels)
+        if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
+            framed = FramedSurface.build(surface, frame, coarse.levels)
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
