@@ -401,16 +401,19 @@ def _segment_hit(a, b, tri):
 
 
 @nb.njit(cache=True, parallel=True)
-def _segment_cuts(bucket_keys, offsets, bucket_faces, snapped, faces, unit, coords, starts, ends, start_inside,
+def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts, ends, start_inside,
                   cell_bits, key_shift, out, status):
     for e in nb.prange(starts.shape[0]):
         a = np.empty(3)
         b = np.empty(3)
-        tri = np.empty((3, 3))
+        lo = np.empty(3)
+        hi = np.empty(3)
         cell = np.empty(3, dtype=np.int64)
         for i in range(3):
             a[i] = coords[starts[e], i]
             b[i] = coords[ends[e], i]
+            lo[i] = min(a[i], b[i]) - _BOX_SLACK
+            hi[i] = max(a[i], b[i]) + _BOX_SLACK
             # The cell holding the midpoint holds the whole edge: edges lie in one leaf of
             # this level or finer.  On a cell face either neighbour's bucket has the faces.
             cell[i] = ((coords[starts[e], i] + coords[ends[e], i]) >> (cell_bits + 1)) << cell_bits
@@ -419,10 +422,14 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, snapped, faces, unit, coor
         best = -1.0
         if k < bucket_keys.shape[0] and bucket_keys[k] == key:
             for j in range(offsets[k], offsets[k + 1]):
-                f = bucket_faces[j]
-                for c in range(3):
-                    for i in range(3):
-                        tri[c, i] = snapped[faces[f, c], i] / unit
+                tri = triangles[bucket_faces[j]]
+                apart = False
+                for i in range(3):
+                    if (tri[0, i] < lo[i] and tri[1, i] < lo[i] and tri[2, i] < lo[i]) or \
+                            (tri[0, i] > hi[i] and tri[1, i] > hi[i] and tri[2, i] > hi[i]):
+                        apart = True
+                if apart:
+                    continue
                 t = _segment_hit(a, b, tri)
                 if t < 0:
                     continue
@@ -434,6 +441,11 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, snapped, faces, unit, coor
             best = 0.5
             status[e] = 1
         out[e] = best
+
+
+#: Lattice units by which a triangle's box must miss an edge's box to be skipped untested: far
+#: above the rounding of _segment_hit, whose near misses may count as hits.
+_BOX_SLACK = 1e-6
 
 
 def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
@@ -450,8 +462,8 @@ def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.nda
     """
     out = np.empty(starts.shape[0], dtype=np.float64)
     status = np.empty(starts.shape[0], dtype=np.int8)
-    _segment_cuts(buckets.keys, buckets.offsets, buckets.faces, snapped, np.ascontiguousarray(faces, dtype=np.int64),
-                  float(1 << snap_bits(frame)), np.ascontiguousarray(coords, dtype=np.int64),
+    triangles = snapped[faces] / float(1 << snap_bits(frame))  # (F, 3, 3) lattice coordinates
+    _segment_cuts(buckets.keys, buckets.offsets, buckets.faces, triangles, np.ascontiguousarray(coords, dtype=np.int64),
                   np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(ends, dtype=np.int64),
                   np.ascontiguousarray(start_inside, dtype=np.bool_), frame.levels - buckets.level,
                   MAX_LEVEL - frame.levels, out, status)
