@@ -448,6 +448,11 @@ STALLED_ROUNDS = 3
 WINDOW_RING = 4
 #: Rounds of retarget_warps (with a fresh stuff and measure each) before the band is refined.
 RETARGET_PASSES = 3
+#: Mending also tries other warps at needles, tets with 3r/R below this: the bound on the
+#: dihedral angles does not limit them (a needle can have good angles), and where the band
+#: does not change level stuffing gives none below about 0.1 (corpus, diag/40 to /160).
+#: Only tried: a needle left never makes the band finer.
+NEEDLE_RATIO = 0.15
 
 
 def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
@@ -537,15 +542,16 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
     # changes level may give tets outside the bound.  Other warps near them mend most; where
     # they do not, this pass only says where the band must be finer.
-    bad = _outside_bound(points, out_tets)
+    bad, needles = _outside_bound(points, out_tets)
     for _ in range(RETARGET_PASSES):
-        if bad.size == 0:
+        if bad.size == 0 and needles.size == 0:
             break
-        targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets, bad)
+        targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
+                                          np.union1d(bad, needles), NEEDLE_RATIO)
         if not changed:
             break
         points, out_tets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
-        bad = _outside_bound(points, out_tets)
+        bad, needles = _outside_bound(points, out_tets)
     stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
     is_lattice = lattice < coords.shape[0]  # the bad tets' lattice vertices (every tet has one)
@@ -579,11 +585,13 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     return result, asks
 
 
-def _outside_bound(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+def _outside_bound(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Indices of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
-    included: tet_quality gives them 0 and 180 degrees)."""
+    included: tet_quality gives them 0 and 180 degrees), and of the others with 3r/R below
+    NEEDLE_RATIO."""
     quality = tet_quality(points, tets)
-    return np.nonzero((quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1]))[0]
+    outside = (quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1])
+    return np.nonzero(outside)[0], np.nonzero(~outside & (quality.radius_ratio < NEEDLE_RATIO))[0]
 
 
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:

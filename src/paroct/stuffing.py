@@ -672,18 +672,19 @@ def _set_warp(v, e, signs, targets, points, lattice_points, inside):
 
 @nb.njit(cache=True)
 def _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points,
-              inside, coords, table, prism, lo, hi, sweeps):
-    """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi],
-    the warp (none, or onto the cut point of one of its cut edges) that brings the star's
-    worst violation lowest, ties to the largest smallest 3r/R (no needles: their angles can be
-    good); sweeps until nothing changes.  Changes signs, targets and points in place."""
+              inside, coords, table, prism, lo, hi, min_ratio, sweeps):
+    """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi] or
+    with 3r/R below min_ratio, the warp (none, or onto the cut point of one of its cut edges)
+    that brings the star's worst violation lowest, ties to the largest smallest 3r/R (needles:
+    their angles can be good); sweeps until nothing changes.  Changes signs, targets and
+    points in place."""
     for _ in range(sweeps):
         moved = 0
         for i in range(vertices.shape[0]):
             v = vertices[i]
             star = stars[star_first[i]:star_first[i + 1]]
             worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
-            if worst <= 0:
+            if worst <= 0 and thinnest >= min_ratio:
                 continue
             current = targets[v]
             best, best_thinnest, best_target = worst, thinnest, current
@@ -717,16 +718,18 @@ RETARGET_SWEEPS = 4
 
 
 def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
-                   cuts: CutEdges, targets: np.ndarray, bad: np.ndarray) -> tuple[np.ndarray, int]:
-    """Mend stuffed tets outside DIHEDRAL_BOUND by choosing other warps near them.
+                   cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0) -> tuple[np.ndarray, int]:
+    """Mend stuffed tets outside DIHEDRAL_BOUND (and needles: 3r/R below min_ratio) by choosing
+    other warps near them.
 
     Where the band changes level the Labelle-Shewchuk warp rule proves nothing, and a few
     stuffed tets fall outside the bound (docs/design.md, "Thin features").  A warp moves one
     lattice vertex and changes only the stencils of the lattice tets around it (its star),
     so each vertex of the lattice tets that gave the bad tets may instead warp onto the cut
     point of any of its cut edges, or not at all; the choice that leaves its star's worst
-    angle least outside the bound is kept (_retarget).  Tets the warps would fold count as
-    outside.  Arguments as for stuff, and bad: indices of the bad tets in stuff's output.
+    angle least outside the bound is kept (_retarget), among equals the one with the fattest
+    star by 3r/R.  Tets the warps would fold count as outside.  Arguments as for stuff, and
+    bad: indices of the bad tets (outside the bound or needles) in stuff's output.
     Returns (new warp targets (V,), how many vertices warp elsewhere); the caller stuffs again
     and measures: this is a search, it certifies nothing.
     """
@@ -744,5 +747,5 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     option_first, options = _group_by_vertex(vertices, marked, np.concatenate([cuts.starts, cuts.ends]),
                                              np.tile(np.arange(n_cuts, dtype=np.int64), 2))
     _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points, inside,
-              coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], RETARGET_SWEEPS)
+              coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio), RETARGET_SWEEPS)
     return new, int(np.count_nonzero(new != targets))
