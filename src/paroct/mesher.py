@@ -181,7 +181,8 @@ def mesh(
     of the volume, the solid is meshed again with the boundary refined only near the walls and
     gaps thinner than 2 * size, to two element layers across each (down to min_size, default
     size / 8), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
-    and the band refined where they do not mend it; if that does not keep the solid, the
+    (and near needles, 3r/R below NEEDLE_RATIO) and the band refined where they do not mend
+    an angle; if that does not keep the solid, the
     whole boundary size shrinks by halves instead, as far as max_memory allows.  The report's
     notes say what was done.  False keeps size and only warns.  max_memory: bytes the run
     may use (default: the machine's available memory); a size that would need more is
