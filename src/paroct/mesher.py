@@ -372,9 +372,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     targets[:n_band] = band.targets
     points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
     stages.done("stuff")
-    points, out_tets = _repair_and_measure(points, out_tets, inside, targets, report, stages)
-    result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
-    report.n_vertices = int(result.mesh.points.shape[0])
+    result = _finish(points, out_tets, inside, targets, report, stages)
     lost = _losses(report)
     advice, walls = "", None
     if lost:
@@ -387,24 +385,26 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     return result, lost, advice, walls
 
 
-def _repair_and_measure(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
-                        report: MeshReport, stages: _Stages) -> tuple[np.ndarray, np.ndarray]:
-    """Repair pinches and fill the report's quality, volume and topology: the mesh (points,
-    tets), unused points kept.  inside, targets (V,): over the lattice vertices, points
-    0..V-1 of the stuffed mesh."""
+def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
+            report: MeshReport, stages: _Stages) -> MeshResult:
+    """Repair pinches, fill the report's quality, volume and topology, and drop unused points:
+    the result of a pass.  points, out_tets: stuff's output; inside, targets (V,): over the
+    lattice vertices, points 0..V-1 of the stuffed mesh."""
     core = np.zeros(points.shape[0], dtype=bool)
     core[: inside.shape[0]] = inside & (targets < 0)
     out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
     stages.done("repair")
 
     _measure(points, out_tets, core, faces_out, report)
+    mesh = TetMesh(*_compact(points, out_tets))
+    report.n_vertices = int(mesh.points.shape[0])
     stages.done("quality")
     if report.unresolved_cuts:
         report.warnings.append(
             f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
-    return points, out_tets
+    return MeshResult(mesh, report)
 
 
 #: Volume loss (relative) above which the mesh is said to have lost part of the solid.
@@ -567,11 +567,10 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     if bad.size:
         # Refine the band around each bad tet to the finest level among its lattice vertices'
         # leaves (one level more if they are all alike).
-        ends = np.where(is_lattice, lattice, 0)
-        side = np.where(is_lattice, spacing[ends], 0)
-        finest_side = np.where(is_lattice, spacing[ends], np.iinfo(np.int64).max).min(axis=1)
+        sides = spacing[np.where(is_lattice, lattice, 0)]
+        finest_side = np.where(is_lattice, sides, np.iinfo(np.int64).max).min(axis=1)
         level = frame.levels - np.log2(finest_side).astype(np.int64)
-        level = np.where(finest_side == side.max(axis=1), level + 1, level)
+        level = np.where(finest_side == np.where(is_lattice, sides, 0).max(axis=1), level + 1, level)
         level = np.minimum(level, frame.levels)
         rows, cols = np.nonzero(is_lattice)
         asks = band_levels(frame, coarse_level, coords[lattice[rows, cols]], level[rows])
@@ -580,10 +579,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     if window is not None:
         stages.done("quality")
         return None, asks
-    points, out_tets = _repair_and_measure(points, out_tets, inside, targets, report, stages)
-    result = MeshResult(TetMesh(*_compact(points, out_tets)), report)
-    report.n_vertices = int(result.mesh.points.shape[0])
-    return result, asks
+    return _finish(points, out_tets, inside, targets, report, stages), asks
 
 
 def _outside_bound(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
