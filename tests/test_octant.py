@@ -96,3 +96,20 @@ def test_sorted_lookup_matches_isin_and_index(seed):
     at, found = octant.sorted_lookup(keys, values)
     assert np.array_equal(found, np.isin(values, keys))
     assert np.array_equal(keys[at[found]], values[found])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_octants_in_cells_matches_coordinate_division(seed):
+    """Against the obvious twin: an octant is in a cell of ``level`` iff its anchor coordinates
+    divided by the cell side are those of one of the cells."""
+    rng = np.random.default_rng(seed)
+    level = int(rng.integers(1, 6))
+    side = 1 << (octant.MAX_LEVEL - level)
+    cell_coords = rng.integers(0, 1 << level, size=(20, 3)) * side
+    cells = octant.sorted_unique(octant.morton_keys(cell_coords))
+    anchors = np.concatenate([cell_coords + rng.integers(0, side, size=(20, 3)),
+                              rng.integers(0, 1 << octant.MAX_LEVEL, size=(80, 3))])
+    want = np.array([tuple(a // side) in {tuple(c // side) for c in cell_coords} for a in anchors])
+    got = octant.octants_in_cells(octant.morton_keys(anchors), cells, level)
+    assert want[:20].all() and not want.all()
+    assert np.array_equal(got, want)

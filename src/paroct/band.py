@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, ancestor_keys, morton_keys, sorted_lookup, sorted_unique
+from .octant import MAX_LEVEL, ancestor_keys, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
 from .octree import (FaceBuckets, balance, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
@@ -116,7 +116,7 @@ def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bit
         level += 1
         met = _fine_surface_cells(frame, snapped, faces, snap_bits, buckets, fine, level,
                                   sorted_unique(ancestor_keys(parents, coarse)))
-        keys = met[sorted_lookup(parents, ancestor_keys(met, level - 1))[1]]
+        keys = met[octants_in_cells(met, parents, level - 1)]
         asked = wanted.level_of(ancestor_keys(keys, coarse))
     keys = np.concatenate(out_keys)
     levels = np.concatenate(out_levels)
@@ -139,11 +139,11 @@ def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
         mine = np.zeros(faces.shape[0], dtype=bool)
         mine[buckets.faces[pos]] = True
         found = surface_cells(frame, snapped, faces[mine], snap_bits, level)
-        found = found[sorted_lookup(new, ancestor_keys(found, buckets.level))[1]]
+        found = found[octants_in_cells(found, new, buckets.level)]
         met = np.sort(np.concatenate([met, found]))
         done = np.sort(np.concatenate([done, new]))
         fine.done[level], fine.met[level] = done, met
-    return met[sorted_lookup(coarse_keys, ancestor_keys(met, buckets.level))[1]]
+    return met[octants_in_cells(met, coarse_keys, buckets.level)]
 
 
 def surface_prune(frame: FatFrame, surface_keys: np.ndarray, x_crossings: RowCrossings):

@@ -21,7 +21,7 @@ from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fa
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
                    no_band_levels, surface_prune)
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
-from .octant import MAX_LEVEL, ancestor_keys, morton_keys, sorted_lookup, sorted_unique
+from .octant import MAX_LEVEL, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
 from .octree import FaceBuckets, balance, face_buckets, octant_lattice_anchors, surface_cells
 from .quality import summarize, tet_quality
 from .repair import remove_pinches
@@ -518,7 +518,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = _leaf_levels(frame, levels)
     if window is not None:
-        keep = _in_cells(keys, window[0], coarse_level)
+        keep = octants_in_cells(keys, window[0], coarse_level)
         keys, levels, in_band = keys[keep], levels[keep], in_band[keep]
     stages.done("octree")
 
@@ -560,7 +560,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         some = lattice[np.arange(bad.size), np.argmax(is_lattice, axis=1)][:, None]
         cells = morton_keys((coords[np.where(is_lattice, lattice, some)].reshape(-1, 3)
                              >> (frame.levels - coarse_level)) << (MAX_LEVEL - coarse_level))
-        measured = _in_cells(cells, window[1], coarse_level).reshape(-1, 4).all(axis=1)
+        measured = octants_in_cells(cells, window[1], coarse_level).reshape(-1, 4).all(axis=1)
         bad, lattice, is_lattice = bad[measured], lattice[measured], is_lattice[measured]
     report.bad_tets = int(bad.size)
     asks = no_band_levels(coarse_level)
@@ -594,12 +594,6 @@ def _outside_bound(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:
     """The distinct leaf levels counted from the finest (0 = finest), ascending."""
     return tuple(int(v) for v in np.flatnonzero(np.bincount(frame.levels - levels.astype(np.int64))))
-
-
-def _in_cells(keys: np.ndarray, cells: np.ndarray, coarse_level: int) -> np.ndarray:
-    """Mask (N,) of the octants (keys (N,), of coarse_level or finer) inside one of the coarse
-    cells (sorted keys).  A coarser octant counts when its anchor's cell is one of them."""
-    return sorted_lookup(cells, ancestor_keys(keys, coarse_level))[1]
 
 
 def _band_vertex_ids(vertices: LeafVertices, in_band: np.ndarray) -> np.ndarray:

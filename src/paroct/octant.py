@@ -150,3 +150,10 @@ def sorted_lookup(sorted_keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarr
         return np.zeros(values.shape[0], dtype=np.int64), np.zeros(values.shape[0], dtype=bool)
     at = np.minimum(np.searchsorted(sorted_keys, values), sorted_keys.shape[0] - 1)
     return at, sorted_keys[at] == values
+
+
+def octants_in_cells(keys: np.ndarray, cells: np.ndarray, level: int) -> np.ndarray:
+    """Mask (N,) of the octants (keys (N,)) whose anchor lies in one of the cells of ``level``
+    (sorted distinct keys): for an octant of that level or finer, its ancestor there is one
+    of them."""
+    return sorted_lookup(cells, ancestor_keys(keys, level))[1]
