@@ -154,6 +154,54 @@ def cells_meeting_triangles(tris: np.ndarray, side: float, n_cells: int) -> set[
     return out
 
 
+def face_centres(anchors: np.ndarray, sides: np.ndarray, rule: str) -> set[tuple[int, int, int]]:
+    """Face centres of the coarse leaves that are vertices, face by face from sets of points.
+
+    A cube edge is split when its midpoint is some leaf's corner.  A face's centre is a vertex
+    when it is some leaf's corner (a finer face), or, "eager", when one of its four edges is
+    split, or, "minimal", when both face edges at a corner off the face's Freudenthal diagonal
+    (the diagonal joins its corners of least and greatest coordinate sum) are split.
+    """
+    corners = set()
+    for a, s in zip(anchors.tolist(), sides.tolist()):
+        for dx in (0, s):
+            for dy in (0, s):
+                for dz in (0, s):
+                    corners.add((a[0] + dx, a[1] + dy, a[2] + dz))
+    out = set()
+    for a, s in zip(anchors.tolist(), sides.tolist()):
+        if s < 2:
+            continue
+        for k in range(3):
+            for b in (0, s):
+                i, j = [x for x in range(3) if x != k]
+                quad = []
+                for di in (0, s):
+                    for dj in (0, s):
+                        p = list(a)
+                        p[k] += b
+                        p[i] += di
+                        p[j] += dj
+                        quad.append(tuple(p))
+                centre = tuple(sum(p[x] for p in quad) // 4 for x in range(3))
+                quad.sort(key=sum)
+                off_diagonal = quad[1:3]
+
+                def split(p, q):
+                    return tuple((p[x] + q[x]) // 2 for x in range(3)) in corners
+
+                def adjacent(q):
+                    return [p for p in (quad[0], quad[3]) if sum(abs(p[x] - q[x]) for x in range(3)) == s]
+
+                if rule == "eager":
+                    asked = any(split(q, p) for q in off_diagonal for p in adjacent(q))
+                else:
+                    asked = any(all(split(q, p) for p in adjacent(q)) for q in off_diagonal)
+                if asked or centre in corners:
+                    out.add(centre)
+    return out
+
+
 def match_faces(tets: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Face neighbours by a dict of sorted vertex triples (see topology.match_faces)."""
     faces_of = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]

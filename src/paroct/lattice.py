@@ -19,7 +19,7 @@ from .transitions import (
     CHAIN_IS_ODD,
     CHAIN_SPLITS,
     CHAINS,
-    FACE_EDGES,
+    FACE_CENTRE_RULES,
     SPLIT_POINT_OFFSETS,
     TEMPLATE_COUNTS,
     TEMPLATE_TETS,
@@ -134,14 +134,15 @@ def _add(coords, count, x, y, z):
 
 
 @nb.njit(cache=True)
-def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_offsets, face_edges):
+def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_offsets, face_rule):
     """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
     (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
     lattice coordinates (V, 3) of the vertices.
 
     The prefix points (P, 3) get ids 0..P-1; then corners are numbered in leaf order; then,
-    for each coarse leaf in order, the centres of its faces with a split cube edge (the eager
-    face-centre rule).
+    for each coarse leaf in order, the centres of its faces that face_rule (6, G, K) asks for
+    (transitions.FACE_CENTRE_RULES: some group of K face edges all split) and that are not
+    already corners of finer leaves.
     table: an empty vertex table (_vertex_id): dense over the box box_lo + 8 * bricks, which
     then holds every vertex, or hashed with 2**bits rows, grown as it fills.
     """
@@ -191,9 +192,13 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_
                 split_ids[r, p], _ = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, False)
                 continue
             split = False
-            for e in face_edges[p - 12]:
-                split |= split_ids[r, e] >= 0
-            if not split:
+            for g in range(face_rule.shape[1]):
+                group = True
+                for e in face_rule[p - 12, g]:
+                    group &= split_ids[r, e] >= 0
+                split |= group
+            if not split:  # still a vertex if the face is finer: its centre is their corner
+                split_ids[r, p], _ = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, False)
                 continue
             vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
             if new:
@@ -332,16 +337,21 @@ def _bounding_box(anchors, sides, prefix):
     return lo, hi
 
 
-def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray | None = None) -> LeafVertices:
+def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray | None = None, *,
+                    face_centres: str = "eager") -> LeafVertices:
     """Global vertex ids of leaf corners and of the transition points of coarse leaves.
 
     anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides
     (powers of two).  The leaves must form a 2:1-balanced linear octree (or part of one),
     sorted by Morton key: a cube-edge midpoint of a leaf is a vertex iff it is a corner of
-    another leaf, and face centres follow the eager rule (paroct.transitions).
+    another leaf, and face centres follow the rule face_centres, "eager" or "minimal"
+    (paroct.transitions: minimal gives fewer tets, down to 30 degrees; eager's templates are
+    the ones stuffing may cut, as its quad rule never cycles on them).
     prefix: (P, 3) distinct leaf corners numbered first, as 0..P-1, so that arrays over an
     earlier numbering of them stay valid.
     """
+    if face_centres not in FACE_CENTRE_RULES:
+        raise ValueError(f"face_centres = {face_centres!r}, expected one of {sorted(FACE_CENTRE_RULES)}")
     anchors = np.ascontiguousarray(anchors, dtype=np.int64)
     sides = np.ascontiguousarray(sides, dtype=np.int64)
     if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
@@ -359,14 +369,14 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     else:
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
         table = np.full((1 << bits, 2), _EMPTY, dtype=np.int64)
-    return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, SPLIT_POINT_OFFSETS, FACE_EDGES))
+    return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, SPLIT_POINT_OFFSETS,
+                                                FACE_CENTRE_RULES[face_centres]))
 
 
 def vertex_spacing(vertices: LeafVertices, sides: np.ndarray) -> np.ndarray:
     """Side (V,) int64 of the finest leaf whose closure holds each vertex (sides: (L,) of the
     leaves numbered by number_vertices): the smallest side of the leaves having it as a corner;
-    for an eager face centre, which is no leaf's corner, the side of the leaves sharing that
-    face.  Stuffing caps the warps of vertices shared with finer leaves by it."""
+    for a face centre that is no leaf's corner, the side of the leaves sharing that face.  Stuffing caps the warps of vertices shared with finer leaves by it."""
     return _vertex_spacing(vertices.corner_ids, vertices.split_row, vertices.split_ids,
                            np.ascontiguousarray(sides, dtype=np.int64), vertices.coords.shape[0])
 
@@ -406,13 +416,13 @@ def graded_tets(vertices: LeafVertices, marked: np.ndarray | None = None) -> np.
     return tets
 
 
-def leaf_tets(anchors: np.ndarray, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def leaf_tets(anchors: np.ndarray, sides: np.ndarray, *, face_centres: str = "eager") -> tuple[np.ndarray, np.ndarray]:
     """All tets of the leaves of a 2:1-balanced octree (six fat tets per leaf without finer
     neighbours, transition templates otherwise).
 
     anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides.
     Returns (vertex_coords (V, 3) int64 lattice units, tets (M, 4) int32).  For leaves of one
-    size, tets 6i..6i+5 belong to leaf i.
+    size, tets 6i..6i+5 belong to leaf i.  face_centres: the rule (number_vertices).
     """
-    vertices = number_vertices(anchors, sides)
+    vertices = number_vertices(anchors, sides, face_centres=face_centres)
     return vertices.coords, graded_tets(vertices)

@@ -358,8 +358,10 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     stages.done("octree")
 
     # The band's vertices come first, so its classes, cut edges and warps keep their ids.
+    # Stuffing cuts no template here (every tet it touches is a fat tet of the band), so the
+    # minimal face-centre rule's fewer tets can be had.
     vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)),
-                               prefix=band.coords)
+                               prefix=band.coords, face_centres="minimal")
     coords = vertices.coords
     n_band = band.coords.shape[0]
     inside = vertex_classes(vertices, band.inside)
@@ -523,7 +525,8 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     stages.done("octree")
 
     sides = np.int64(1) << (frame.levels - levels.astype(np.int64))
-    vertices = number_vertices(octant_lattice_anchors(keys, frame), sides)
+    # Stuffing cuts band templates here: the eager rule's, on which its quad rule never cycles.
+    vertices = number_vertices(octant_lattice_anchors(keys, frame), sides, face_centres="eager")
     coords = vertices.coords
     inside = np.ones(coords.shape[0], dtype=bool)
     ids = _band_vertex_ids(vertices, in_band)

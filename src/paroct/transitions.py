@@ -2,20 +2,23 @@
 
 A coarse leaf whose neighbours are finer has lattice vertices in the middle of some of its
 cube edges (corners of the finer leaves).  Following docs/transitions.md (where the table
-was found by exhaustive search and verified on all 628 leaf-pattern orbits):
+was found by exhaustive search and verified on all 628 leaf-pattern orbits under both rules):
 
-* the *eager* face-centre rule: a leaf face with any split cube edge gets its centre as a
-  vertex (a point of the finer lattice; both leaves sharing the face decide it from the
-  face alone, so the decision never spreads);
+* a face-centre rule decides which leaf faces get their centre as a vertex (a point of the
+  finer lattice; both leaves sharing the face decide it from the face's four cube edges
+  alone, so the decision never spreads).  A finer face always has it (it is a corner of the
+  finer leaves).  Otherwise, *minimal*: the two face edges at one of the face's off-diagonal
+  corners are split; *eager*: any face edge is split (FACE_CENTRE_RULES);
 * each of the leaf's six Freudenthal tets, written as its chain v0 = 0, v1, v2, v3 = 7 of
   corners sorted by popcount, is replaced by the template of its 5-bit split mask
   ``e01 | e12 << 1 | e23 << 2 | e02 << 3 | e13 << 4`` (e01, e12, e23 cube edges, e02 and
   e13 face diagonals whose midpoints are face centres; the main diagonal e03 is never
   split and the leaf centre never used).
 
-Under the eager rule only 13 masks occur; their templates have dihedral angles in
-[35.26, 120] degrees and 3r/R >= 0.5444.  No Steiner points: every vertex is a corner,
-an edge midpoint or a face centre of the leaf.
+Under the minimal rule 25 masks occur, with dihedral angles in [30, 120] degrees (30 exactly
+where a lone split cube edge bisects a tet) and 3r/R >= 0.5444; under the eager rule 13,
+in [35.26, 120], for more tets (more face centres).  No Steiner points: every vertex is a
+corner, an edge midpoint or a face centre of the leaf.
 """
 
 from __future__ import annotations
@@ -55,7 +58,7 @@ TEMPLATES: dict[int, tuple[tuple[int, int, int, int], ...]] = {
     30: ((0, 1, 7, 8), (2, 7, 5, 6), (3, 0, 7, 8), (7, 1, 5, 8), (7, 3, 8, 6), (5, 7, 8, 6)),
     31: ((0, 4, 7, 8), (2, 7, 5, 6), (3, 0, 7, 8), (4, 1, 5, 8), (7, 3, 8, 6), (7, 4, 5, 8), (5, 7, 8, 6)),
 }
-#: The masks that occur under the eager face-centre rule.
+#: The masks that occur under the eager face-centre rule (all 25 occur under the minimal one).
 EAGER_MASKS = (0, 8, 9, 16, 20, 24, 25, 26, 27, 28, 29, 30, 31)
 MAX_TEMPLATE_TETS = 7
 
@@ -116,3 +119,24 @@ CHAIN_SPLITS = np.array(
     [[split_point_index(ch[i], ch[j]) for i, j in ((0, 1), (1, 2), (2, 3), (0, 2), (1, 3))] for ch in CHAINS],
     dtype=np.int64,
 )
+
+
+def _face_corner_edges() -> np.ndarray:
+    """(6, 2, 2): for face f = 2 k + b, at each of its two off-diagonal corners q (in-plane bits
+    (1, 0) and (0, 1); the face diagonal of the Freudenthal tets joins (0, 0) and (1, 1)), the
+    split points of the two face edges meeting at q."""
+    out = np.zeros((6, 2, 2), dtype=np.int64)
+    for f in range(6):
+        k, b = divmod(f, 2)
+        i, j = [a for a in range(3) if a != k]
+        for n, (bi, bj) in enumerate(((1, 0), (0, 1))):
+            q = (b << k) | (bi << i) | (bj << j)
+            out[f, n] = [split_point_index(q, q ^ (1 << i)), split_point_index(q, q ^ (1 << j))]
+    return out
+
+
+#: Face-centre rules as groups of cube-edge split points: FACE_CENTRE_RULES[rule][f] (G, K)
+#: lists G groups of K edges of face f, and the face gets its centre when every edge of some
+#: group is split (or when the face is finer).  "minimal": the two edges at an off-diagonal
+#: corner; "eager": any one edge.
+FACE_CENTRE_RULES = {"minimal": _face_corner_edges(), "eager": FACE_EDGES[:, :, None].copy()}
