@@ -154,13 +154,14 @@ def cells_meeting_triangles(tris: np.ndarray, side: float, n_cells: int) -> set[
     return out
 
 
-def face_centres(anchors: np.ndarray, sides: np.ndarray, rule: str) -> set[tuple[int, int, int]]:
+def face_centres(anchors: np.ndarray, sides: np.ndarray, eager: np.ndarray) -> set[tuple[int, int, int]]:
     """Face centres of the coarse leaves that are vertices, face by face from sets of points.
 
     A cube edge is split when its midpoint is some leaf's corner.  A face's centre is a vertex
-    when it is some leaf's corner (a finer face), or, "eager", when one of its four edges is
-    split, or, "minimal", when both face edges at a corner off the face's Freudenthal diagonal
-    (the diagonal joins its corners of least and greatest coordinate sum) are split.
+    when it is some leaf's corner (a finer face); or when both face edges at a corner off the
+    face's Freudenthal diagonal (the diagonal joins its corners of least and greatest
+    coordinate sum) are split (the minimal rule); or when one of its four edges is split and a
+    leaf sharing the face (this one or the same-size leaf across) is marked in eager (L,).
     """
     corners = set()
     for a, s in zip(anchors.tolist(), sides.tolist()):
@@ -168,6 +169,7 @@ def face_centres(anchors: np.ndarray, sides: np.ndarray, rule: str) -> set[tuple
             for dy in (0, s):
                 for dz in (0, s):
                     corners.add((a[0] + dx, a[1] + dy, a[2] + dz))
+    marked = {(tuple(a), s): bool(e) for a, s, e in zip(anchors.tolist(), sides.tolist(), eager.tolist())}
     out = set()
     for a, s in zip(anchors.tolist(), sides.tolist()):
         if s < 2:
@@ -193,11 +195,12 @@ def face_centres(anchors: np.ndarray, sides: np.ndarray, rule: str) -> set[tuple
                 def adjacent(q):
                     return [p for p in (quad[0], quad[3]) if sum(abs(p[x] - q[x]) for x in range(3)) == s]
 
-                if rule == "eager":
-                    asked = any(split(q, p) for q in off_diagonal for p in adjacent(q))
-                else:
-                    asked = any(all(split(q, p) for p in adjacent(q)) for q in off_diagonal)
-                if asked or centre in corners:
+                across = list(a)
+                across[k] += s if b else -s
+                any_marked = marked[(tuple(a), s)] or marked.get((tuple(across), s), False)
+                minimal = any(all(split(q, p) for p in adjacent(q)) for q in off_diagonal)
+                one_edge = any(split(q, p) for q in off_diagonal for p in adjacent(q))
+                if centre in corners or minimal or (one_edge and any_marked):
                     out.add(centre)
     return out
 

@@ -141,7 +141,8 @@ def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size):
     assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
     assert abs(rep.volume_error) < 0.01
     assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
-    assert 30 <= rep.interior_min_dihedral and rep.interior_max_dihedral <= 135
+    # 30 is met exactly (a lone split cube edge halves a template tet), so within rounding.
+    assert 30 - 1e-9 <= rep.interior_min_dihedral and rep.interior_max_dihedral <= 135
     everywhere = mesh(surface, size=rep.size, max_size=rep.max_size, thin_features=False)
     assert rep.n_tets < 0.6 * everywhere.report.n_tets
 

@@ -84,12 +84,13 @@ def _random_balanced_tree(seed, max_level):
     return anchors, sides
 
 
-@pytest.mark.parametrize("rule,min_angle", [("minimal", 30 - EPS), ("eager", 35.26)])
+@pytest.mark.parametrize("rule,min_angle", [("minimal", 30 - EPS), ("eager", 35.26), ("mixed", 30 - EPS)])
 @pytest.mark.parametrize("seed", range(16))
 def test_random_balanced_trees_conform_with_template_quality(seed, rule, min_angle):
     max_level = 3 + seed % 3
     anchors, sides = _random_balanced_tree(seed, max_level)
-    coords, tets = lattice.leaf_tets(anchors, sides, face_centres=rule)
+    eager = _eager_leaves(rule, len(sides), seed)
+    coords, tets = lattice.leaf_tets(anchors, sides, eager=eager)
     points = coords @ LATTICE_TO_SPACE.T
     q = tet_quality(points, tets)
     assert np.all(q.volume > 0)
@@ -104,7 +105,7 @@ def test_random_balanced_trees_conform_with_template_quality(seed, rule, min_ang
     assert q.min_dihedral.min() >= min_angle and q.max_dihedral.max() <= 120 + EPS
     assert q.radius_ratio.min() >= 0.544
     # Leaves with no finer neighbour keep their six fat tets.
-    vertices = lattice.number_vertices(anchors, sides, face_centres=rule)
+    vertices = lattice.number_vertices(anchors, sides, eager=eager)
     plain = np.ones(len(sides), dtype=bool)
     plain[sides >= 2] = (vertices.split_ids < 0).all(axis=1)
     assert np.isclose(q.radius_ratio, FAT_RATIO, atol=1e-9).sum() >= 6 * plain.sum()
@@ -128,22 +129,25 @@ def test_dense_and_hashed_vertex_numbering_agree(monkeypatch, seed):
     assert np.array_equal(dense.coords[dense.split_ids[dense.split_row[rows]][has]], expected[has])
 
 
-@pytest.mark.parametrize("rule", ["minimal", "eager"])
+def _eager_leaves(rule, n, seed):
+    """Leaves marked for the eager face-centre rule: none, all, or a random half."""
+    if rule == "mixed":
+        return np.random.default_rng(300 + seed).random(n) < 0.5
+    return np.full(n, rule == "eager")
+
+
+@pytest.mark.parametrize("rule", ["minimal", "eager", "mixed"])
 @pytest.mark.parametrize("seed", range(4))
 def test_face_centre_rules_match_their_definition(seed, rule):
     anchors, sides = _random_balanced_tree(200 + seed, 3 + seed % 2)
-    vertices = lattice.number_vertices(anchors, sides, face_centres=rule)
+    eager = _eager_leaves(rule, len(sides), seed)
+    vertices = lattice.number_vertices(anchors, sides, eager=eager)
     rows = vertices.split_row[vertices.split_row >= 0]
     ids = vertices.split_ids[rows][:, 12:]
     got = {tuple(c) for c in vertices.coords[ids[ids >= 0]].tolist()}
-    assert got == face_centres(anchors, sides, rule)
-    if rule == "minimal":  # fewer face centres than eager on the same tree, never more
-        assert got <= face_centres(anchors, sides, "eager")
-
-
-def test_unknown_face_centre_rule_is_refused():
-    with pytest.raises(ValueError, match="face_centres = 'red'"):
-        lattice.number_vertices(np.zeros((1, 3), dtype=np.int64), np.ones(1, dtype=np.int64), face_centres="red")
+    assert got == face_centres(anchors, sides, eager)
+    # Marking more leaves eager only adds face centres.
+    assert face_centres(anchors, sides, np.zeros(len(sides), bool)) <= got <= face_centres(anchors, sides, np.ones(len(sides), bool))
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -134,15 +134,17 @@ def _add(coords, count, x, y, z):
 
 
 @nb.njit(cache=True)
-def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_offsets, face_rule):
+def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_offsets, eager, eager_rule, minimal_rule):
     """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
     (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
     lattice coordinates (V, 3) of the vertices.
 
-    The prefix points (P, 3) get ids 0..P-1; then corners are numbered in leaf order; then,
-    for each coarse leaf in order, the centres of its faces that face_rule (6, G, K) asks for
-    (transitions.FACE_CENTRE_RULES: some group of K face edges all split) and that are not
-    already corners of finer leaves.
+    The prefix points (P, 3) get ids 0..P-1; then corners are numbered in leaf order; then the
+    centres of the faces of coarse leaves, first of the leaves marked eager (L,), in order, by
+    eager_rule, then of the others by minimal_rule (rules (6, G, K) as in
+    transitions.FACE_CENTRE_RULES: some group of K face edges all split).  A face centre no rule
+    asks for is still a vertex if it already is one: a corner of finer leaves, or asked for by
+    the eager leaf on the face's other side.
     table: an empty vertex table (_vertex_id): dense over the box box_lo + 8 * bricks, which
     then holds every vertex, or hashed with 2**bits rows, grown as it fills.
     """
@@ -179,32 +181,29 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_
     split_ids = np.full((n_coarse, 18), -1, dtype=np.int32)
     if n_coarse:
         coords = _grow(coords, count, count + 6 * n_coarse)
-    for i in range(n):
-        r = split_row[i]
-        if r < 0:
-            continue
-        half = sides[i] // 2
-        for p in range(18):
-            x = anchors[i, 0] + half * split_offsets[p, 0]
-            y = anchors[i, 1] + half * split_offsets[p, 1]
-            z = anchors[i, 2] + half * split_offsets[p, 2]
-            if p < 12:
-                split_ids[r, p], _ = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, False)
+    for phase in range(2):
+        rule = eager_rule if phase == 0 else minimal_rule
+        for i in range(n):
+            r = split_row[i]
+            if r < 0 or eager[i] != (phase == 0):
                 continue
-            split = False
-            for g in range(face_rule.shape[1]):
-                group = True
-                for e in face_rule[p - 12, g]:
-                    group &= split_ids[r, e] >= 0
-                split |= group
-            if not split:  # still a vertex if the face is finer: its centre is their corner
-                split_ids[r, p], _ = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, False)
-                continue
-            vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
-            if new:
-                count = _add(coords, count, x, y, z)
-                table, bits = _grow_table(table, bits, count)
-            split_ids[r, p] = vid
+            half = sides[i] // 2
+            for p in range(18):
+                x = anchors[i, 0] + half * split_offsets[p, 0]
+                y = anchors[i, 1] + half * split_offsets[p, 1]
+                z = anchors[i, 2] + half * split_offsets[p, 2]
+                split = False
+                if p >= 12:
+                    for g in range(rule.shape[1]):
+                        group = True
+                        for e in rule[p - 12, g]:
+                            group &= split_ids[r, e] >= 0
+                        split |= group
+                vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, split)
+                if new:
+                    count = _add(coords, count, x, y, z)
+                    table, bits = _grow_table(table, bits, count)
+                split_ids[r, p] = vid
     return corner_ids, split_row, split_ids, coords[:count].copy()
 
 
@@ -338,20 +337,20 @@ def _bounding_box(anchors, sides, prefix):
 
 
 def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray | None = None, *,
-                    face_centres: str = "eager") -> LeafVertices:
+                    eager: bool | np.ndarray = True) -> LeafVertices:
     """Global vertex ids of leaf corners and of the transition points of coarse leaves.
 
     anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides
     (powers of two).  The leaves must form a 2:1-balanced linear octree (or part of one),
     sorted by Morton key: a cube-edge midpoint of a leaf is a vertex iff it is a corner of
-    another leaf, and face centres follow the rule face_centres, "eager" or "minimal"
-    (paroct.transitions: minimal gives fewer tets, down to 30 degrees; eager's templates are
-    the ones stuffing may cut, as its quad rule never cycles on them).
+    another leaf.  Face centres (paroct.transitions): a face gets its centre if the minimal
+    rule asks, or if the eager rule asks and a leaf sharing the face is marked in eager (bool
+    for all leaves, or (L,) bool).  So the templates of every eager leaf are eager templates,
+    the ones stuffing may cut (its quad rule never cycles on them), and the other leaves keep
+    the minimal rule's fewer tets (down to 30 degrees).
     prefix: (P, 3) distinct leaf corners numbered first, as 0..P-1, so that arrays over an
     earlier numbering of them stay valid.
     """
-    if face_centres not in FACE_CENTRE_RULES:
-        raise ValueError(f"face_centres = {face_centres!r}, expected one of {sorted(FACE_CENTRE_RULES)}")
     anchors = np.ascontiguousarray(anchors, dtype=np.int64)
     sides = np.ascontiguousarray(sides, dtype=np.int64)
     if anchors.ndim != 2 or anchors.shape[1] != 3 or sides.shape != (anchors.shape[0],):
@@ -369,8 +368,10 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     else:
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
         table = np.full((1 << bits, 2), _EMPTY, dtype=np.int64)
+    eager = np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape)
     return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, SPLIT_POINT_OFFSETS,
-                                                FACE_CENTRE_RULES[face_centres]))
+                                          np.ascontiguousarray(eager), FACE_CENTRE_RULES["eager"],
+                                          FACE_CENTRE_RULES["minimal"]))
 
 
 def vertex_spacing(vertices: LeafVertices, sides: np.ndarray) -> np.ndarray:
@@ -416,13 +417,14 @@ def graded_tets(vertices: LeafVertices, marked: np.ndarray | None = None) -> np.
     return tets
 
 
-def leaf_tets(anchors: np.ndarray, sides: np.ndarray, *, face_centres: str = "eager") -> tuple[np.ndarray, np.ndarray]:
+def leaf_tets(anchors: np.ndarray, sides: np.ndarray, *, eager: bool | np.ndarray = True) -> tuple[np.ndarray, np.ndarray]:
     """All tets of the leaves of a 2:1-balanced octree (six fat tets per leaf without finer
     neighbours, transition templates otherwise).
 
     anchors: (L, 3) int64 leaf minimum corners, lattice units; sides: (L,) int64 leaf sides.
     Returns (vertex_coords (V, 3) int64 lattice units, tets (M, 4) int32).  For leaves of one
-    size, tets 6i..6i+5 belong to leaf i.  face_centres: the rule (number_vertices).
+    size, tets 6i..6i+5 belong to leaf i.  eager: the leaves whose faces follow the eager
+    face-centre rule (number_vertices).
     """
-    vertices = number_vertices(anchors, sides, face_centres=face_centres)
+    vertices = number_vertices(anchors, sides, eager=eager)
     return vertices.coords, graded_tets(vertices)

@@ -361,7 +361,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     # Stuffing cuts no template here (every tet it touches is a fat tet of the band), so the
     # minimal face-centre rule's fewer tets can be had.
     vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)),
-                               prefix=band.coords, face_centres="minimal")
+                               prefix=band.coords, eager=False)
     coords = vertices.coords
     n_band = band.coords.shape[0]
     inside = vertex_classes(vertices, band.inside)
@@ -525,8 +525,9 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     stages.done("octree")
 
     sides = np.int64(1) << (frame.levels - levels.astype(np.int64))
-    # Stuffing cuts band templates here: the eager rule's, on which its quad rule never cycles.
-    vertices = number_vertices(octant_lattice_anchors(keys, frame), sides, face_centres="eager")
+    # Stuffing cuts the templates of band leaves here: the eager rule's, on which its quad rule
+    # never cycles; the other leaves keep the minimal rule's fewer tets.
+    vertices = number_vertices(octant_lattice_anchors(keys, frame), sides, eager=in_band)
     coords = vertices.coords
     inside = np.ones(coords.shape[0], dtype=bool)
     ids = _band_vertex_ids(vertices, in_band)

@@ -5,10 +5,11 @@ cube edges (corners of the finer leaves).  Following docs/transitions.md (where 
 was found by exhaustive search and verified on all 628 leaf-pattern orbits under both rules):
 
 * a face-centre rule decides which leaf faces get their centre as a vertex (a point of the
-  finer lattice; both leaves sharing the face decide it from the face's four cube edges
-  alone, so the decision never spreads).  A finer face always has it (it is a corner of the
-  finer leaves).  Otherwise, *minimal*: the two face edges at one of the face's off-diagonal
-  corners are split; *eager*: any face edge is split (FACE_CENTRE_RULES);
+  finer lattice, decided from the face's four cube edges, so the decision never spreads).
+  A finer face always has it (it is a corner of the finer leaves).  Otherwise, *minimal*:
+  the two face edges at one of the face's off-diagonal corners are split; *eager*: any face
+  edge is split (FACE_CENTRE_RULES; lattice.number_vertices applies eager to the faces of
+  marked leaves, minimal to the rest);
 * each of the leaf's six Freudenthal tets, written as its chain v0 = 0, v1, v2, v3 = 7 of
   corners sorted by popcount, is replaced by the template of its 5-bit split mask
   ``e01 | e12 << 1 | e23 << 2 | e02 << 3 | e13 << 4`` (e01, e12, e23 cube edges, e02 and
