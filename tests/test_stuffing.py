@@ -15,7 +15,7 @@ from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _star_score, _warped, collect_cut_edges, mixed_tets,
-                              retarget_warps, stuff, warp_targets)
+                              restuff, retarget_warps, stuff, warp_targets)
 from paroct.topology import match_faces
 
 from .naive import star_violation
@@ -281,6 +281,34 @@ def _radius_ratios(points, out, coords):
     lattice_ids = np.where(out < coords.shape[0], out, 0)
     on_box = np.any((out < coords.shape[0]) & _on_box(coords)[lattice_ids], axis=1)
     return np.where(on_box, 1.0, np.where(q.volume > 0, q.radius_ratio, 0.0))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_restuff_gives_what_stuff_gives_and_says_what_it_kept(seed):
+    """Stuffing again only around the vertices whose warps changed gives the very tets stuff
+    gives with the new warps; kept names the unchanged tets' old indices."""
+    rng = np.random.default_rng(500 + seed)
+    k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
+    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+    points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+    for _ in range(3):
+        new = targets.copy()
+        ends = np.concatenate([cuts.starts, cuts.ends])
+        for v in rng.choice(ends, 6):  # another cut edge of v, or no warp at all
+            own = np.nonzero((cuts.starts == v) | (cuts.ends == v))[0]
+            new[v] = rng.choice(np.append(own, -1))
+        other = np.where(new >= 0, np.where(cuts.starts[np.maximum(new, 0)] == np.arange(len(new)),
+                                            cuts.ends[np.maximum(new, 0)], cuts.starts[np.maximum(new, 0)]), -1)
+        new[(new >= 0) & (new[np.maximum(other, 0)] == new)] = -1  # both ends onto one cut point: none
+        want_points, want = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+        got_points, got, kept = restuff(x, coords, tets, inside, cuts, targets, out, new, flat_ok=True)
+        assert np.array_equal(got_points, want_points) and np.array_equal(got, want)
+        assert np.array_equal(got[kept >= 0], out[kept[kept >= 0]])
+        # A tet through a vertex whose warp changed was stuffed again; most were kept.
+        through = np.isin(got, np.flatnonzero(new != targets)).any(axis=1)
+        assert through.any() and np.all(kept[through] < 0)
+        assert np.count_nonzero(kept < 0) < 0.5 * len(got)
+        targets, out = new, got
 
 
 def test_retarget_warps_mends_needles_and_keeps_the_bound_first():

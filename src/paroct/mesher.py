@@ -26,8 +26,8 @@ from .octree import FaceBuckets, balance, face_buckets, octant_lattice_anchors, 
 from .quality import summarize, tet_quality
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
-from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, retarget_warps, stuff,
-                       warp_targets)
+from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, restuff, retarget_warps,
+                       stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import surface_topology
 
@@ -547,16 +547,23 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
     # changes level may give tets outside the bound.  Other warps near them mend most; where
     # they do not, this pass only says where the band must be finer.
-    bad, needles = _outside_bound(points, out_tets)
+    is_bad, is_needle = _outside_bound(points, out_tets)
     for _ in range(RETARGET_PASSES):
-        if bad.size == 0 and needles.size == 0:
+        if not (is_bad.any() or is_needle.any()):
             break
-        targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
-                                          np.union1d(bad, needles), NEEDLE_RATIO)
+        new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
+                                              np.flatnonzero(is_bad | is_needle), NEEDLE_RATIO)
         if not changed:
             break
-        points, out_tets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
-        bad, needles = _outside_bound(points, out_tets)
+        # Only the lattice tets around the vertices that warp elsewhere change: stuff and
+        # measure those again, keep the rest.
+        points, out_tets, kept = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets, new_targets,
+                                         flat_ok=True)
+        targets = new_targets
+        again = np.flatnonzero(kept < 0)
+        is_bad, is_needle = is_bad[kept], is_needle[kept]
+        is_bad[again], is_needle[again] = _outside_bound(points, out_tets[again])
+    bad = np.flatnonzero(is_bad)
     stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
     is_lattice = lattice < coords.shape[0]  # the bad tets' lattice vertices (every tet has one)
@@ -587,12 +594,12 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
 
 
 def _outside_bound(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
+    """Masks (M,) of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
     included: tet_quality gives them 0 and 180 degrees), and of the others with 3r/R below
     NEEDLE_RATIO."""
     quality = tet_quality(points, tets)
     outside = (quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1])
-    return np.nonzero(outside)[0], np.nonzero(~outside & (quality.radius_ratio < NEEDLE_RATIO))[0]
+    return outside, ~outside & (quality.radius_ratio < NEEDLE_RATIO)
 
 
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:

@@ -574,9 +574,14 @@ def _warped(lattice_points: np.ndarray, inside: np.ndarray, cuts: CutEdges,
     warped = targets >= 0
     points = np.concatenate([lattice_points, cuts.points])
     points[: lattice_points.shape[0]][warped] = cuts.points[targets[warped]]
+    return points, _signs(inside, targets)
+
+
+def _signs(inside: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Signs (V,) int8 of the lattice vertices: +1 inside, -1 outside, 0 warped (targets >= 0)."""
     signs = np.where(inside, 1, -1).astype(np.int8)
-    signs[warped] = 0
-    return points, signs
+    signs[targets >= 0] = 0
+    return signs
 
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
@@ -592,19 +597,74 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     flat_ok keeps it, for a band that changes level, whose caller measures every tet and
     mends or refines where one is bad (retarget_warps).
     """
-    n_lattice = lattice_points.shape[0]
     points, signs = _warped(lattice_points, inside, cuts, targets)
-    tets = np.ascontiguousarray(tets)
+    out = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok)
+    return points, out
+
+
+def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges, flat_ok: bool) -> np.ndarray:
+    """The stencil tets (M, 4) int32 of the lattice tets (T, 4), in order, oriented (stuff)."""
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
     np.cumsum(_stencil_counts(tets, signs), out=offsets[1:])
     out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
     touched = np.empty(out.shape[0], dtype=np.bool_)
-    if _stencils(tets, signs, coords, cuts.table, n_lattice, PRISM_TETS, offsets, out, touched):
+    if _stencils(tets, signs, coords, cuts.table, lattice_points.shape[0], PRISM_TETS, offsets, out, touched):
         raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
     folded = _orient(points, lattice_points, out, touched)
     if folded and not flat_ok:
         raise AssertionError(f"stuffing produced {folded} flat or folded tets")
-    return points, out
+    return out
+
+
+def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
+            targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *,
+            flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """stuff(..., new_targets), given out = stuff(..., targets)[1]: only the lattice tets with a
+    vertex whose warp changed are stuffed again, the others' tets are copied.
+
+    Returns (points, tets (M, 4) int32, kept (M,) int64): the same points and tets as stuff
+    with new_targets, and for each tet its index in out, or -1 if it was stuffed again.
+    """
+    tets = np.ascontiguousarray(tets)
+    points, signs = _warped(lattice_points, inside, cuts, new_targets)
+    counts = _stencil_counts(tets, _signs(inside, targets))
+    old_offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
+    np.cumsum(counts, out=old_offsets[1:])
+    if old_offsets[-1] != out.shape[0]:
+        raise ValueError(f"len(out) = {out.shape[0]}, but targets stuff {old_offsets[-1]} tets")
+    rows = _rows_touching(tets, new_targets != targets)
+    again = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets[rows]), signs, cuts, flat_ok)
+    counts[rows] = _stencil_counts(np.ascontiguousarray(tets[rows]), signs)
+    offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    again_row = np.full(tets.shape[0], -1, dtype=np.int64)
+    again_row[rows] = np.arange(rows.shape[0])
+    again_offsets = np.zeros(rows.shape[0] + 1, dtype=np.int64)
+    np.cumsum(counts[rows], out=again_offsets[1:])
+    new_out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
+    kept = np.empty(new_out.shape[0], dtype=np.int64)
+    _splice(out, old_offsets, again, again_offsets, again_row, offsets, new_out, kept)
+    return points, new_out, kept
+
+
+@nb.njit(cache=True, parallel=True)
+def _splice(out, old_offsets, again, again_offsets, again_row, offsets, new_out, kept):
+    """new_out[offsets[t]:offsets[t + 1]]: lattice tet t's tets, from again if it was stuffed
+    again (again_row[t] >= 0), else from out; kept: their index in out, or -1."""
+    for t in nb.prange(offsets.shape[0] - 1):
+        k = offsets[t]
+        j = again_row[t]
+        n = offsets[t + 1] - k
+        for i in range(n):
+            if j < 0:
+                src = old_offsets[t] + i
+                kept[k + i] = src
+                for c in range(4):
+                    new_out[k + i, c] = out[src, c]
+            else:
+                kept[k + i] = -1
+                for c in range(4):
+                    new_out[k + i, c] = again[again_offsets[j] + i, c]
 
 
 @nb.njit(cache=True)
