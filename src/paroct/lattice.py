@@ -377,7 +377,8 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
 def vertex_spacing(vertices: LeafVertices, sides: np.ndarray) -> np.ndarray:
     """Side (V,) int64 of the finest leaf whose closure holds each vertex (sides: (L,) of the
     leaves numbered by number_vertices): the smallest side of the leaves having it as a corner;
-    for a face centre that is no leaf's corner, the side of the leaves sharing that face.  Stuffing caps the warps of vertices shared with finer leaves by it."""
+    for a face centre that is no leaf's corner, the side of the leaves sharing that face.
+    Stuffing caps the warps of vertices shared with finer leaves by it."""
     return _vertex_spacing(vertices.corner_ids, vertices.split_row, vertices.split_ids,
                            np.ascontiguousarray(sides, dtype=np.int64), vertices.coords.shape[0])
 

@@ -182,11 +182,11 @@ def mesh(
     gaps thinner than 2 * size, to two element layers across each (down to min_size, default
     size / 8), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
     (and near needles, 3r/R below NEEDLE_RATIO) and the band refined where they do not mend
-    an angle; if that does not keep the solid, the
-    whole boundary size shrinks by halves instead, as far as max_memory allows.  The report's
-    notes say what was done.  False keeps size and only warns.  max_memory: bytes the run
-    may use (default: the machine's available memory); a size that would need more is
-    refused before any work.  progress: called with each stage's name when it ends.
+    an angle; if that does not keep the solid, the whole boundary size shrinks by halves
+    instead, as far as max_memory allows.  The report's notes say what was done.  False
+    keeps size and only warns.  max_memory: bytes the run may use (default: the machine's
+    available memory); a size that would need more is refused before any work.  progress:
+    called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
@@ -449,7 +449,8 @@ STALLED_ROUNDS = 3
 #: (2:1 balance and templates change the leaves up to about two cells away) and measure the
 #: tets two cells less far; the whole band is measured again once those are clean.
 WINDOW_RING = 4
-#: Rounds of retarget_warps (with a fresh stuff and measure each) before the band is refined.
+#: Rounds of retarget_warps (each followed by stuffing and measuring again what it changed)
+#: before the band is refined.
 RETARGET_PASSES = 3
 #: Mending also tries other warps at needles, tets with 3r/R below this: the bound on the
 #: dihedral angles does not limit them (a needle can have good angles), and where the band

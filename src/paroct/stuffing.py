@@ -598,12 +598,14 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     mends or refines where one is bad (retarget_warps).
     """
     points, signs = _warped(lattice_points, inside, cuts, targets)
-    out = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok)
+    out, _ = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok)
     return points, out
 
 
-def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges, flat_ok: bool) -> np.ndarray:
-    """The stencil tets (M, 4) int32 of the lattice tets (T, 4), in order, oriented (stuff)."""
+def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
+                 flat_ok: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The stencil tets (M, 4) int32 of the lattice tets (T, 4), in order, oriented (stuff),
+    and offsets (T + 1,): lattice tet t's are out[offsets[t]:offsets[t + 1]]."""
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
     np.cumsum(_stencil_counts(tets, signs), out=offsets[1:])
     out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
@@ -613,7 +615,7 @@ def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges, fl
     folded = _orient(points, lattice_points, out, touched)
     if folded and not flat_ok:
         raise AssertionError(f"stuffing produced {folded} flat or folded tets")
-    return out
+    return out, offsets
 
 
 def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
@@ -633,14 +635,12 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     if old_offsets[-1] != out.shape[0]:
         raise ValueError(f"len(out) = {out.shape[0]}, but targets stuff {old_offsets[-1]} tets")
     rows = _rows_touching(tets, new_targets != targets)
-    again = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets[rows]), signs, cuts, flat_ok)
-    counts[rows] = _stencil_counts(np.ascontiguousarray(tets[rows]), signs)
+    again, again_offsets = _stencils_of(points, lattice_points, coords, tets[rows], signs, cuts, flat_ok)
+    counts[rows] = np.diff(again_offsets)
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     again_row = np.full(tets.shape[0], -1, dtype=np.int64)
     again_row[rows] = np.arange(rows.shape[0])
-    again_offsets = np.zeros(rows.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts[rows], out=again_offsets[1:])
     new_out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
     kept = np.empty(new_out.shape[0], dtype=np.int64)
     _splice(out, old_offsets, again, again_offsets, again_row, offsets, new_out, kept)
