@@ -8,10 +8,11 @@ import pytest
 from paroct import mesher, octant
 from paroct.band import FineSurfaceCells, band_cells, band_levels, merge_band_levels
 from paroct.check import check_mesh, distances_to_triangles
-from paroct.frame import X_AXIS_DIRECTION, fat_frame
+from paroct.frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, fat_frame
 from paroct.mesher import mesh
-from paroct.octree import face_buckets, surface_cells, tree_is_linear
-from paroct.rays import row_crossings, segment_cut_fractions, snap_bits, snap_surface, winding_numbers
+from paroct.octree import face_buckets, faces_meeting_cells, surface_cells, tree_is_linear
+from paroct.rays import (edge_cut_fractions, row_crossings, segment_cut_fractions, snap_bits, snap_surface,
+                         winding_numbers)
 from paroct.stuffing import DIHEDRAL_BOUND
 from paroct.surface import load_surface
 
@@ -118,6 +119,37 @@ def test_segment_cut_points_lie_on_the_surface_between_ends_of_two_classes():
     points = frame.to_space(starts[cut] + fracs[:, None] * (ends[cut] - starts[cut]))
     # On the snapped surface: within the snap resolution of the input.
     assert distances_to_triangles(points, surface.vertices, surface.faces).max() < 2 * frame.h * 2.0 ** -snap_bits(frame)
+
+
+def test_crossings_of_the_triangles_near_some_cells_cut_their_unit_edges_as_all_triangles_do():
+    """mesher.cut_edges crosses only the triangles of the coarse cells holding unit edges."""
+    surface = load_surface(manifold3d.Manifold.sphere(1.0, 48))
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, 0.05)
+    snapped = snap_surface(frame, surface.vertices)
+    faces = surface.faces.astype(np.int64)
+    coarse = frame.levels - 3
+    buckets = face_buckets(frame, snapped, faces, snap_bits(frame), coarse)
+    rng = np.random.default_rng(5)
+    chosen = np.sort(rng.choice(buckets.keys, buckets.keys.size // 5, replace=False))
+    # A key that is no surface cell adds no triangle.
+    near = faces_meeting_cells(buckets, np.append(chosen, np.int64(1) << 62), faces.shape[0])
+    slices = [buckets.faces[buckets.offsets[k]:buckets.offsets[k + 1]] for k in np.searchsorted(buckets.keys, chosen)]
+    assert np.array_equal(np.flatnonzero(near), np.unique(np.concatenate(slices)))
+    assert 0 < near.sum() < faces.shape[0] // 2
+    side = 1 << (frame.levels - coarse)
+    cells = octant.morton_decode(chosen) >> (ML - frame.levels)
+    x_rows = row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)
+    cut_edges = 0
+    for d, step in enumerate(EDGE_DIRECTIONS):
+        starts = cells[rng.integers(0, len(cells), 20000)] + rng.integers(0, side, size=(20000, 3))
+        start_in = winding_numbers(x_rows, starts) > 0
+        cut = np.flatnonzero(start_in != (winding_numbers(x_rows, starts + step) > 0))
+        cut_edges += cut.size
+        every = edge_cut_fractions(row_crossings(frame, snapped, faces, d), starts[cut], start_in[cut])
+        some = edge_cut_fractions(row_crossings(frame, snapped, faces, d, np.flatnonzero(near)), starts[cut],
+                                  start_in[cut])
+        assert np.array_equal(every[0], some[0]) and np.array_equal(every[1], some[1])
+    assert cut_edges > 700
 
 
 def _slot_block():

@@ -17,7 +17,7 @@ import numpy as np
 
 from .frame import FatFrame
 from .octant import MAX_LEVEL, ancestor_keys, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
-from .octree import (FaceBuckets, balance, octant_lattice_anchors, octants_holding, octants_within,
+from .octree import (FaceBuckets, balance, faces_meeting_cells, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
 from .sizing import OUTSIDE, UNDECIDED, WHOLLY_INSIDE, SizeField, size_seeds
@@ -133,12 +133,7 @@ def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
     met = fine.met.get(level, np.zeros(0, dtype=np.int64))
     new = coarse_keys[~sorted_lookup(done, coarse_keys)[1]]
     if new.size:
-        at = np.searchsorted(buckets.keys, new)
-        counts = buckets.offsets[at + 1] - buckets.offsets[at]
-        pos = np.repeat(buckets.offsets[at] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-        mine = np.zeros(faces.shape[0], dtype=bool)
-        mine[buckets.faces[pos]] = True
-        found = surface_cells(frame, snapped, faces[mine], snap_bits, level)
+        found = surface_cells(frame, snapped, faces[faces_meeting_cells(buckets, new, faces.shape[0])], snap_bits, level)
         found = found[octants_in_cells(found, new, buckets.level)]
         met = np.sort(np.concatenate([met, found]))
         done = np.sort(np.concatenate([done, new]))

@@ -21,8 +21,8 @@ from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fa
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
                    no_band_levels, surface_prune)
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
-from .octant import MAX_LEVEL, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
-from .octree import FaceBuckets, balance, face_buckets, octant_lattice_anchors, surface_cells
+from .octant import MAX_LEVEL, ancestor_keys, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
+from .octree import FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells
 from .quality import summarize, tet_quality
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
@@ -735,16 +735,38 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
                                                    inside[starts[other]])
         fracs[other] = f
         report.unresolved_cuts += int(unresolved.sum())
+    near = None
     for d in range(EDGE_DIRECTIONS.shape[0]):
         sel = np.nonzero(dirs == d)[0]
         if sel.size == 0:
             continue
-        if d not in crossings:
-            crossings[d] = rays.row_crossings(frame, snapped, faces, d)
-        f, unresolved = rays.edge_cut_fractions(crossings[d], coords[starts[sel]], inside[starts[sel]])
+        if d in crossings:
+            rows = crossings[d]
+        elif buckets is None:
+            rows = crossings[d] = rays.row_crossings(frame, snapped, faces, d)
+        else:
+            # With buckets the unit edges are the band's finest leaves, often a small part of
+            # the surface: only the triangles of the coarse cells holding them are crossed.
+            if near is None:
+                near = np.flatnonzero(_faces_near_unit_edges(frame, buckets, coords, starts, ends, dirs, faces.shape[0]))
+            rows = rays.row_crossings(frame, snapped, faces, d, near)
+        f, unresolved = rays.edge_cut_fractions(rows, coords[starts[sel]], inside[starts[sel]])
         fracs[sel] = f
         report.unresolved_cuts += int(unresolved.sum())
     return CutEdges(starts, ends, dirs, fracs, frame.to_space(_along_edges(coords, starts, ends, fracs)), tuple(table))
+
+
+def _faces_near_unit_edges(frame: FatFrame, buckets: FaceBuckets, coords: np.ndarray, starts: np.ndarray,
+                           ends: np.ndarray, dirs: np.ndarray, n_faces: int) -> np.ndarray:
+    """Mask (n_faces,) of the triangles in the buckets of the cells holding an end of a unit
+    lattice edge (dirs >= 0): a closed unit edge lies in the closed cell of either end, so
+    these triangles give all its crossings."""
+    unit = dirs >= 0
+    ends_used = np.zeros(coords.shape[0], dtype=bool)
+    ends_used[starts[unit]] = True
+    ends_used[ends[unit]] = True
+    at = coords[ends_used].astype(np.int64) << (MAX_LEVEL - frame.levels)
+    return faces_meeting_cells(buckets, sorted_unique(ancestor_keys(morton_keys(at), buckets.level)), n_faces)
 
 
 @nb.njit(cache=True)

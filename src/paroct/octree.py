@@ -26,6 +26,7 @@ from .octant import (
     octant_len,
     octant_overlaps,
     octant_parent_key,
+    sorted_lookup,
     sorted_unique,
 )
 
@@ -318,6 +319,19 @@ def face_buckets(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_b
     starts = np.nonzero(first)[0]
     offsets = np.append(starts, keys.shape[0]).astype(np.int64)
     return FaceBuckets(level, keys[starts] << (3 * (MAX_LEVEL - frame.levels)), offsets, face_ids)
+
+
+def faces_meeting_cells(buckets: FaceBuckets, cells: np.ndarray, n_faces: int) -> np.ndarray:
+    """Mask (n_faces,) of the triangles that meet one of ``cells`` (keys of buckets.level,
+    any order; a cell that is not a surface cell has no bucket and meets none)."""
+    at, found = sorted_lookup(buckets.keys, cells)
+    at = at[found]
+    counts = buckets.offsets[at + 1] - buckets.offsets[at]
+    # Index ranges offsets[at]:offsets[at + 1], concatenated.
+    pos = np.repeat(buckets.offsets[at] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    mine = np.zeros(n_faces, dtype=bool)
+    mine[buckets.faces[pos]] = True
+    return mine
 
 
 @nb.njit(cache=True)

@@ -236,11 +236,15 @@ class RowCrossings:
     faces: np.ndarray
 
 
-def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direction: int) -> RowCrossings:
-    """All crossings of lattice rows parallel to EDGE_DIRECTIONS[direction] with the snapped surface."""
+def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direction: int,
+                  face_ids: np.ndarray | None = None) -> RowCrossings:
+    """All crossings of lattice rows parallel to EDGE_DIRECTIONS[direction] with the snapped
+    surface, or only with the triangles faces[face_ids] (ascending ids; the crossings' faces
+    still index ``faces``).  Such a subset gives exactly the full crossings in every cell
+    whose closed cube meets no other triangle."""
     T = row_basis(direction)
     coords = np.ascontiguousarray(snapped @ T.T, dtype=np.int64)
-    triangles = np.ascontiguousarray(faces, dtype=np.int64)
+    triangles = np.ascontiguousarray(faces if face_ids is None else faces[face_ids], dtype=np.int64)
     bits = snap_bits(frame)
     counts = np.zeros(triangles.shape[0], dtype=np.int64)
     none_i8, none_i32 = np.empty(0, dtype=np.int8), np.empty(0, dtype=np.int32)
@@ -253,6 +257,8 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     signs = np.empty(total, dtype=np.int8)
     hit_faces = np.empty(total, dtype=np.int32)
     _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, np.empty(0, dtype=np.int64))
+    if face_ids is not None:
+        hit_faces = face_ids[hit_faces].astype(np.int32)
     order = np.argsort(keys, kind="stable")
     _order_cells(keys, fracs, hit_faces, order)
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces[order])
