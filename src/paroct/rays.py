@@ -397,18 +397,31 @@ def _segment_hit(a, b, tri):
     d1 = _orient3d(b[0], b[1], b[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
     if (d0 > 0 and d1 > 0) or (d0 < 0 and d1 < 0) or d0 == d1:
         return -1.0
-    s = np.empty(3)
-    for k in range(3):
-        p, q = tri[k], tri[(k + 1) % 3]
-        s[k] = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], p[0], p[1], p[2], q[0], q[1], q[2])
-    if not ((s[0] >= 0 and s[1] >= 0 and s[2] >= 0) or (s[0] <= 0 and s[1] <= 0 and s[2] <= 0)):
+    s0 = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2])
+    s1 = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    s2 = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], tri[2, 0], tri[2, 1], tri[2, 2], tri[0, 0], tri[0, 1], tri[0, 2])
+    if not ((s0 >= 0 and s1 >= 0 and s2 >= 0) or (s0 <= 0 and s1 <= 0 and s2 <= 0)):
         return -1.0
     return min(max(d0 / (d0 - d1), 0.0), 1.0)
 
 
 @nb.njit(cache=True, parallel=True)
+def _bucket_boxes(bucket_faces, triangles, slack):
+    """Boxes (J, 6) (lo xyz, hi xyz) of the triangles at each bucket position, grown by slack:
+    the edges of a bucket scan them in order, from contiguous memory."""
+    boxes = np.empty((bucket_faces.shape[0], 6))
+    for j in nb.prange(bucket_faces.shape[0]):
+        tri = triangles[bucket_faces[j]]
+        for i in range(3):
+            boxes[j, i] = min(tri[0, i], tri[1, i], tri[2, i]) - slack
+            boxes[j, 3 + i] = max(tri[0, i], tri[1, i], tri[2, i]) + slack
+    return boxes
+
+
+@nb.njit(cache=True, parallel=True)
 def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts, ends, start_inside,
                   cell_bits, key_shift, out, status):
+    boxes = _bucket_boxes(bucket_faces, triangles, _BOX_SLACK)
     for e in nb.prange(starts.shape[0]):
         a = np.empty(3)
         b = np.empty(3)
@@ -418,8 +431,8 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts,
         for i in range(3):
             a[i] = coords[starts[e], i]
             b[i] = coords[ends[e], i]
-            lo[i] = min(a[i], b[i]) - _BOX_SLACK
-            hi[i] = max(a[i], b[i]) + _BOX_SLACK
+            lo[i] = min(a[i], b[i])
+            hi[i] = max(a[i], b[i])
             # The cell holding the midpoint holds the whole edge: edges lie in one leaf of
             # this level or finer.  On a cell face either neighbour's bucket has the faces.
             cell[i] = ((coords[starts[e], i] + coords[ends[e], i]) >> (cell_bits + 1)) << cell_bits
@@ -428,15 +441,10 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts,
         best = -1.0
         if k < bucket_keys.shape[0] and bucket_keys[k] == key:
             for j in range(offsets[k], offsets[k + 1]):
-                tri = triangles[bucket_faces[j]]
-                apart = False
-                for i in range(3):
-                    if (tri[0, i] < lo[i] and tri[1, i] < lo[i] and tri[2, i] < lo[i]) or \
-                            (tri[0, i] > hi[i] and tri[1, i] > hi[i] and tri[2, i] > hi[i]):
-                        apart = True
-                if apart:
+                if (boxes[j, 0] > hi[0] or boxes[j, 1] > hi[1] or boxes[j, 2] > hi[2]
+                        or boxes[j, 3] < lo[0] or boxes[j, 4] < lo[1] or boxes[j, 5] < lo[2]):
                     continue
-                t = _segment_hit(a, b, tri)
+                t = _segment_hit(a, b, triangles[bucket_faces[j]])
                 if t < 0:
                     continue
                 # The crossing nearest the inside end, as for unit edges.
