@@ -742,11 +742,12 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
             continue
         if d in crossings:
             rows = crossings[d]
-        elif buckets is None:
+        elif other.size == 0:
             rows = crossings[d] = rays.row_crossings(frame, snapped, faces, d)
         else:
-            # With buckets the unit edges are the band's finest leaves, often a small part of
-            # the surface: only the triangles of the coarse cells holding them are crossed.
+            # A band that changes level: its unit edges lie in its finest leaves, often a small
+            # part of the surface, so only the triangles of the coarse cells holding them are
+            # crossed.  (A band of one level cuts unit edges only, and needs every row.)
             if near is None:
                 near = np.flatnonzero(_faces_near_unit_edges(frame, buckets, coords, starts, ends, dirs, faces.shape[0]))
             rows = rays.row_crossings(frame, snapped, faces, d, near)
@@ -766,7 +767,7 @@ def _faces_near_unit_edges(frame: FatFrame, buckets: FaceBuckets, coords: np.nda
     ends_used[starts[unit]] = True
     ends_used[ends[unit]] = True
     at = coords[ends_used].astype(np.int64) << (MAX_LEVEL - frame.levels)
-    return faces_meeting_cells(buckets, sorted_unique(ancestor_keys(morton_keys(at), buckets.level)), n_faces)
+    return faces_meeting_cells(buckets, ancestor_keys(morton_keys(at), buckets.level), n_faces)
 
 
 @nb.njit(cache=True)

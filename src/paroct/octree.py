@@ -323,9 +323,11 @@ def face_buckets(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_b
 
 def faces_meeting_cells(buckets: FaceBuckets, cells: np.ndarray, n_faces: int) -> np.ndarray:
     """Mask (n_faces,) of the triangles that meet one of ``cells`` (keys of buckets.level,
-    any order; a cell that is not a surface cell has no bucket and meets none)."""
+    any order, repeats allowed; a cell that is not a surface cell has no bucket and meets none)."""
     at, found = sorted_lookup(buckets.keys, cells)
-    at = at[found]
+    marked = np.zeros(buckets.keys.shape[0], dtype=bool)
+    marked[at[found]] = True
+    at = np.flatnonzero(marked)
     counts = buckets.offsets[at + 1] - buckets.offsets[at]
     # Index ranges offsets[at]:offsets[at + 1], concatenated.
     pos = np.repeat(buckets.offsets[at] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
