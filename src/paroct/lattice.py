@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+from numba import types
 from numba.extending import overload
 
 from .frame import CUBE_CORNERS
@@ -26,11 +27,13 @@ from .transitions import (
 )
 
 _EMPTY = np.int64(-1)
-#: Number leaf corners through a dense box index (4 bytes a lattice point of the leaves' box,
-#: in bricks of 8^3) when the box has at most this many points per leaf, else through a hash
-#: table (16 bytes a slot, at least 8 slots a leaf).  At 64 (256 bytes a leaf, which emits
-#: about six tets) the dense table is 2x faster than hashing on graded meshes and the bands
-#: of curved parts at diag/160; it is freed before stuffing allocates its output.
+#: Number leaf corners through a dense index (4 bytes a lattice point, in bricks of 8^3: only
+#: the bricks that hold a leaf point, found through a directory of 4 bytes a brick of the
+#: leaves' box) when directory and bricks have at most this many slots per leaf, else through
+#: a hash table (16 bytes a slot, at least 8 slots a leaf).  At 64 (256 bytes a leaf, which
+#: emits about six tets) the dense index is 2x faster than hashing on graded meshes and the
+#: bands of curved parts at diag/160 (4-5x on locally refined bands, whose box is mostly
+#: empty); it is freed before stuffing allocates its output.
 DENSE_SLOTS_PER_LEAF = 64
 _FIB = np.uint64(0x9E3779B97F4A7C15)
 #: Bits of a 3-bit coordinate spread to every third bit: a point's Morton index in its brick.
@@ -47,23 +50,73 @@ def _slot(key, bits):
 
 
 @nb.njit(cache=True, inline="always")
-def _dense_slot(x, y, z, box_lo, bricks):
-    """Index of a point of the box in the brick layout: 8^3 bricks in x-fastest order, Morton
-    order inside a brick, so leaves visited in Morton order touch few cache lines."""
-    dx = x - box_lo[0]
-    dy = y - box_lo[1]
-    dz = z - box_lo[2]
-    brick = ((dz >> 3) * bricks[1] + (dy >> 3)) * bricks[0] + (dx >> 3)
-    return (brick << 9) | _SPREAD3[dx & 7] | (_SPREAD3[dy & 7] << 1) | (_SPREAD3[dz & 7] << 2)
+def _box_brick(x, y, z, box_lo, bricks):
+    """Index of the 8^3 brick of the box (x-fastest order) holding a point of the box."""
+    return (((z - box_lo[2]) >> 3) * bricks[1] + ((y - box_lo[1]) >> 3)) * bricks[0] + ((x - box_lo[0]) >> 3)
 
 
-def _vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
+def _dense_slot(x, y, z, box_lo, bricks, directory):
+    """Index of a point of the box in the dense index: its brick's place times 512, plus its
+    Morton order inside the brick, so leaves visited in Morton order touch few cache lines.
+    The brick's place is its index in the box (directory None: every brick is in the index),
+    or directory[that index] (_brick_directory: only the bricks holding leaf points are)."""
+    raise NotImplementedError("compiled only: see _overload_dense_slot")
+
+
+@nb.njit(cache=True, inline="always")
+def _in_brick(place, x, y, z, box_lo):
+    """Slot of a point in the brick at ``place`` of the dense index (Morton order inside)."""
+    return (place << 9) | _SPREAD3[(x - box_lo[0]) & 7] | (_SPREAD3[(y - box_lo[1]) & 7] << 1) | \
+        (_SPREAD3[(z - box_lo[2]) & 7] << 2)
+
+
+@overload(_dense_slot, inline="always")
+def _overload_dense_slot(x, y, z, box_lo, bricks, directory):
+    if isinstance(directory, types.NoneType):
+        # Chosen at compile time: the whole box costs no directory load per point.
+        return lambda x, y, z, box_lo, bricks, directory: _in_brick(_box_brick(x, y, z, box_lo, bricks), x, y, z, box_lo)
+    return lambda x, y, z, box_lo, bricks, directory: _in_brick(
+        np.int64(directory[_box_brick(x, y, z, box_lo, bricks)]), x, y, z, box_lo)
+
+
+@nb.njit(cache=True)
+def _brick_directory(anchors, sides, prefix, box_lo, bricks):
+    """Place (n_bricks,) int32 in the dense index of each brick of the box that holds a leaf
+    point (corners, and for leaves of side >= 2 the split points at half sides) or a prefix
+    point, in brick order; -1 for the others.  Returns (directory, number of bricks placed)."""
+    directory = np.full(bricks[0] * bricks[1] * bricks[2], -1, dtype=np.int32)
+    lo = np.empty(3, dtype=np.int64)
+    hi = np.empty(3, dtype=np.int64)
+    for i in range(anchors.shape[0]):
+        # The leaf's points lie in the bricks from its anchor's to its far corner's: one brick
+        # for most small leaves; a leaf of side 16 or more skips the bricks between its
+        # points (at 0, side / 2 and side along each axis).
+        s = sides[i]
+        for k in range(3):
+            lo[k] = (anchors[i, k] - box_lo[k]) >> 3
+            hi[k] = (anchors[i, k] + s - box_lo[k]) >> 3
+        step = max(np.int64(1), (s // 2) >> 3)
+        for bz in range(lo[2], hi[2] + 1, step):
+            for by in range(lo[1], hi[1] + 1, step):
+                for bx in range(lo[0], hi[0] + 1, step):
+                    directory[(bz * bricks[1] + by) * bricks[0] + bx] = 0
+    for i in range(prefix.shape[0]):
+        directory[_box_brick(prefix[i, 0], prefix[i, 1], prefix[i, 2], box_lo, bricks)] = 0
+    placed = 0
+    for b in range(directory.shape[0]):
+        if directory[b] == 0:
+            directory[b] = placed
+            placed += 1
+    return directory, placed
+
+
+def _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, next_id, add):
     """Id of lattice point (x, y, z) in the vertex table, adding it as next_id when absent and
     ``add``; returns (id or -1, whether it was added).
 
     The table's type picks the lookup when the caller compiles, so each specialization holds
     one branch (a run-time test between the two made the dense loop 6x slower):
-    1-D int32: the dense box table (_dense_slot), -1 where empty.
+    1-D int32: the dense index (_dense_slot through the brick directory), -1 where empty.
     2-D int64 (S, 2): open addressing on Morton keys, rows (key, id), key -1 where empty,
     S = 2**bits.
     """
@@ -71,10 +124,10 @@ def _vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
 
 
 @overload(_vertex_id, inline="always")
-def _overload_vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
+def _overload_vertex_id(table, bits, bricks, box_lo, directory, x, y, z, next_id, add):
     if table.ndim == 1:
-        def dense(table, bits, bricks, box_lo, x, y, z, next_id, add):
-            s = _dense_slot(x, y, z, box_lo, bricks)
+        def dense(table, bits, bricks, box_lo, directory, x, y, z, next_id, add):
+            s = _dense_slot(x, y, z, box_lo, bricks, directory)
             vid = table[s]
             if vid >= 0 or not add:
                 return np.int64(vid), False
@@ -82,7 +135,7 @@ def _overload_vertex_id(table, bits, bricks, box_lo, x, y, z, next_id, add):
             return np.int64(next_id), True
         return dense
 
-    def hashed(table, bits, bricks, box_lo, x, y, z, next_id, add):
+    def hashed(table, bits, bricks, box_lo, directory, x, y, z, next_id, add):
         key = morton_key(x, y, z)
         s = _probe(table, key, bits)
         if table[s, 0] == key:
@@ -134,7 +187,8 @@ def _add(coords, count, x, y, z):
 
 
 @nb.njit(cache=True)
-def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_offsets, eager, eager_rule, minimal_rule):
+def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory, split_offsets, eager, eager_rule,
+                     minimal_rule):
     """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
     (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
     lattice coordinates (V, 3) of the vertices.
@@ -145,8 +199,9 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_
     transitions.FACE_CENTRE_RULES: some group of K face edges all split).  A face centre no rule
     asks for is still a vertex if it already is one: a corner of finer leaves, or asked for by
     the eager leaf on the face's other side.
-    table: an empty vertex table (_vertex_id): dense over the box box_lo + 8 * bricks, which
-    then holds every vertex, or hashed with 2**bits rows, grown as it fills.
+    table: an empty vertex table (_vertex_id): the dense index of the box box_lo + 8 * bricks
+    through directory (_brick_directory), which then holds every vertex, or hashed with 2**bits
+    rows, grown as it fills.
     """
     n = anchors.shape[0]
     corner_ids = np.empty((n, 8), dtype=np.int32)
@@ -158,7 +213,7 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_
         x = prefix[i, 0]
         y = prefix[i, 1]
         z = prefix[i, 2]
-        _, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
+        _, new = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, count, True)
         if new:
             count = _add(coords, count, x, y, z)
             table, bits = _grow_table(table, bits, count)
@@ -167,7 +222,7 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_
             x = anchors[i, 0] + sides[i] * CUBE_CORNERS[c, 0]
             y = anchors[i, 1] + sides[i] * CUBE_CORNERS[c, 1]
             z = anchors[i, 2] + sides[i] * CUBE_CORNERS[c, 2]
-            vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, True)
+            vid, new = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, count, True)
             if new:
                 count = _add(coords, count, x, y, z)
                 table, bits = _grow_table(table, bits, count)
@@ -199,7 +254,7 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, split_
                         for e in rule[p - 12, g]:
                             group &= split_ids[r, e] >= 0
                         split |= group
-                vid, new = _vertex_id(table, bits, bricks, box_lo, x, y, z, count, split)
+                vid, new = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, count, split)
                 if new:
                     count = _add(coords, count, x, y, z)
                     table, bits = _grow_table(table, bits, count)
@@ -358,18 +413,26 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     prefix = np.zeros((0, 3), dtype=np.int64) if prefix is None else np.ascontiguousarray(prefix, dtype=np.int64)
     box_lo = np.zeros(3, dtype=np.int64)
     bricks = np.zeros(3, dtype=np.int64)
+    directory = np.zeros(0, dtype=np.int32)
+    budget = DENSE_SLOTS_PER_LEAF * anchors.shape[0]
+    table = None
     if anchors.shape[0]:
         box_lo, box_hi = _bounding_box(anchors, sides, prefix)
         bricks = (box_hi - box_lo + 8) // 8
-        if np.prod(bricks.astype(np.float64)) * 512 > DENSE_SLOTS_PER_LEAF * anchors.shape[0]:
-            bricks = np.zeros(3, dtype=np.int64)
-    if bricks[0] > 0:
-        table, bits = np.full(int(np.prod(bricks)) * 512, -1, dtype=np.int32), 0
-    else:
+        n_bricks = np.prod(bricks.astype(np.float64))
+        if 512 * n_bricks <= budget:
+            table, bits, directory = np.full(512 * int(n_bricks), -1, dtype=np.int32), 0, None
+        elif n_bricks <= budget:
+            # A box mostly empty, as around a band refined locally: only the bricks in use.
+            directory, placed = _brick_directory(anchors, sides, prefix, box_lo, bricks)
+            if directory.shape[0] + 512 * placed <= budget:
+                table, bits = np.full(512 * placed, -1, dtype=np.int32), 0
+    if table is None:
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
         table = np.full((1 << bits, 2), _EMPTY, dtype=np.int64)
     eager = np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape)
-    return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, SPLIT_POINT_OFFSETS,
+    return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory,
+                                          SPLIT_POINT_OFFSETS,
                                           np.ascontiguousarray(eager), FACE_CENTRE_RULES["eager"],
                                           FACE_CENTRE_RULES["minimal"]))
 
