@@ -90,14 +90,19 @@ def test_band_cells_meet_the_surface_at_the_level_asked(seed):
     assert set(np.unique(levels)) <= {coarse, coarse + 1, coarse + 2}
 
 
-def test_segment_cut_points_lie_on_the_surface_between_ends_of_two_classes():
-    sphere = manifold3d.Manifold.sphere(1.0, 48)
-    surface = load_surface(sphere)
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, 0.1)
+def _bucketed_sphere(h, coarser):
+    """A unit sphere framed at long edge h, with the face buckets of the level ``coarser``
+    levels above the finest: (surface, frame, snapped, faces, coarse level, buckets)."""
+    surface = load_surface(manifold3d.Manifold.sphere(1.0, 48))
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
     snapped = snap_surface(frame, surface.vertices)
     faces = surface.faces.astype(np.int64)
-    coarse = frame.levels - 2
-    buckets = face_buckets(frame, snapped, faces, snap_bits(frame), coarse)
+    coarse = frame.levels - coarser
+    return surface, frame, snapped, faces, coarse, face_buckets(frame, snapped, faces, snap_bits(frame), coarse)
+
+
+def test_segment_cut_points_lie_on_the_surface_between_ends_of_two_classes():
+    surface, frame, snapped, faces, coarse, buckets = _bucketed_sphere(0.1, 2)
     rng = np.random.default_rng(3)
     # Edges off the unit rows, as template and coarse lattice edges are, each inside one coarse cell.
     directions = np.array([[1, -1, 0], [2, 1, -1], [0, 2, 0], [1, 1, 2], [-2, 2, 2], [4, 0, 0]])
@@ -123,12 +128,7 @@ def test_segment_cut_points_lie_on_the_surface_between_ends_of_two_classes():
 
 def test_crossings_of_the_triangles_near_some_cells_cut_their_unit_edges_as_all_triangles_do():
     """mesher.cut_edges crosses only the triangles of the coarse cells holding unit edges."""
-    surface = load_surface(manifold3d.Manifold.sphere(1.0, 48))
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, 0.05)
-    snapped = snap_surface(frame, surface.vertices)
-    faces = surface.faces.astype(np.int64)
-    coarse = frame.levels - 3
-    buckets = face_buckets(frame, snapped, faces, snap_bits(frame), coarse)
+    surface, frame, snapped, faces, coarse, buckets = _bucketed_sphere(0.05, 3)
     rng = np.random.default_rng(5)
     chosen = np.sort(rng.choice(buckets.keys, buckets.keys.size // 5, replace=False))
     # A key that is no surface cell adds no triangle.
