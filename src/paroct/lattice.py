@@ -413,7 +413,6 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     prefix = np.zeros((0, 3), dtype=np.int64) if prefix is None else np.ascontiguousarray(prefix, dtype=np.int64)
     box_lo = np.zeros(3, dtype=np.int64)
     bricks = np.zeros(3, dtype=np.int64)
-    directory = np.zeros(0, dtype=np.int32)
     budget = DENSE_SLOTS_PER_LEAF * anchors.shape[0]
     table = None
     if anchors.shape[0]:
@@ -427,9 +426,9 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
             directory, placed = _brick_directory(anchors, sides, prefix, box_lo, bricks)
             if directory.shape[0] + 512 * placed <= budget:
                 table, bits = np.full(512 * placed, -1, dtype=np.int32), 0
-    if table is None:
+    if table is None:  # hashing reads no directory (not even one that did not fit)
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
-        table = np.full((1 << bits, 2), _EMPTY, dtype=np.int64)
+        table, directory = np.full((1 << bits, 2), _EMPTY, dtype=np.int64), np.zeros(0, dtype=np.int32)
     eager = np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape)
     return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory,
                                           SPLIT_POINT_OFFSETS,
