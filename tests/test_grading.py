@@ -176,7 +176,11 @@ def test_surface_cells_match_polygon_clipping(seed):
     bits = 28 - frame.levels
     # Random triangles plus degenerate ones: axis-aligned, on cell planes, needles.
     tris = rng.uniform(0.5, n_cells - 0.5, size=(6, 3, 3))
-    tris = np.concatenate([tris, [[[2, 2, 2], [5, 2, 2], [2, 5, 2]], [[3, 3, 1.5], [3, 3, 6.5], [3.0000001, 3, 4]]]])
+    # Small ones, most inside one cell (the kernel's shortcut); their third vertex spreads
+    # 8 x wider, so some cross a cell face.
+    small = rng.integers(0, n_cells - 1, size=(6, 1, 3)) + rng.uniform(0.05, 0.95, size=(1, 1, 3)) \
+        + rng.uniform(-0.04, 0.04, size=(6, 3, 3)) * np.array([1, 1, 8])[:, None]
+    tris = np.concatenate([tris, small, [[[2, 2, 2], [5, 2, 2], [2, 5, 2]], [[3, 3, 1.5], [3, 3, 6.5], [3.0000001, 3, 4]]]])
     tris = np.round(tris * (1 << bits)) / (1 << bits)
     snapped = (tris.reshape(-1, 3) * (1 << bits)).astype(np.int64)
     faces = np.arange(len(snapped)).reshape(-1, 3)

@@ -44,13 +44,18 @@ FREUDENTHAL_TETS = np.array(
 
 
 def row_basis(direction: int) -> np.ndarray:
-    """Unimodular integer matrix T (3, 3) with ``T @ EDGE_DIRECTIONS[direction] = e_1``.
+    """Unimodular integer matrix T (3, 3) with ``T @ EDGE_DIRECTIONS[direction] = e_1``
+    (read-only, from ROW_BASES).
 
     Lattice lines parallel to an edge direction d become the rows {(t, p2, p3)} of the
     integer grid: ``T @ u`` gives the position t along the line and the row (p2, p3).
     Rows of T have entries in {-1, 0, 1}, so |T u| <= 2 max|u|.
     """
-    d = EDGE_DIRECTIONS[direction]
+    return ROW_BASES[direction]
+
+
+def _unimodular_basis(d: np.ndarray) -> np.ndarray:
+    """T (3, 3) int64 with T @ d = e_1 and det T = 1, for d with 0/1 entries and a 1."""
     first = int(np.argmax(d))  # a coordinate where d is 1
     T = np.zeros((3, 3), dtype=np.int64)
     T[0, first] = 1
@@ -61,6 +66,12 @@ def row_basis(direction: int) -> np.ndarray:
     if round(np.linalg.det(T)) < 0:
         T[[1, 2]] = T[[2, 1]]
     return T
+
+
+#: row_basis of each edge direction, shape (7, 3, 3) int64, read-only (the rays stages ask
+#: for them a few dozen times per mesh).
+ROW_BASES = np.stack([_unimodular_basis(d) for d in EDGE_DIRECTIONS])
+ROW_BASES.setflags(write=False)
 
 
 @dataclass(frozen=True)

@@ -216,6 +216,18 @@ def triangle_meets_cube(tri, lo, side):
                 or _edge_axes_separate(e2x, e2y, e2z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half))
 
 
+@nb.njit(cache=True, inline="always")
+def _append_cell(out, out_faces, m, cell, cell_bits, f):
+    """Write the key of ``cell`` (cell coordinates (3,)) and face f at slot m, doubling the
+    arrays when full; returns them."""
+    if m == out.shape[0]:
+        out = np.concatenate((out, np.empty(m, dtype=np.int64)))
+        out_faces = np.concatenate((out_faces, np.empty(m, dtype=np.int64)))
+    out[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
+    out_faces[m] = f
+    return out, out_faces
+
+
 @nb.njit(cache=True)
 def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
     """Morton keys (octree coordinates at lattice resolution) of the cells of side
@@ -240,6 +252,13 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
             # Cells whose widened box meets the triangle's box (exact in floats: side is a power of two).
             c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) - 2 * margin) / side))
             c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) + 2 * margin) / side))
+        if c0[0] == c1[0] and c0[1] == c1[1] and c0[2] == c1[2]:
+            # The triangle lies inside one cell (the usual case for fine tessellations): the cell
+            # meets it, no test needed.
+            if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
+                out, out_faces = _append_cell(out, out_faces, m, c0, cell_bits, f)
+                m += 1
+            continue
         # Walk the columns along the axis k where the triangle's plane is steepest: over a
         # column the plane spans a short range of k (|n_k| is the largest normal component),
         # so a slanted triangle costs O(area) cells, not O(box volume).
@@ -277,11 +296,7 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
                         lo[i] = cell[i] * side - margin
                     if not triangle_meets_cube(tri, lo, side + 2 * margin):
                         continue
-                    if m == out.shape[0]:
-                        out = np.concatenate((out, np.empty(m, dtype=np.int64)))
-                        out_faces = np.concatenate((out_faces, np.empty(m, dtype=np.int64)))
-                    out[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
-                    out_faces[m] = f
+                    out, out_faces = _append_cell(out, out_faces, m, cell, cell_bits, f)
                     m += 1
     return out[:m].copy(), out_faces[:m].copy()
 

@@ -175,49 +175,82 @@ def _pack(r2, r3, j):
 _ROW_HIT_CHUNKS = 64
 
 
-@nb.njit(cache=True, parallel=True)
-def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, counts):
-    """Crossings of every triangle (vertex ids (F, 3) into coords (V, 3), row coordinates)
-    with the rows its projection covers.
+@nb.njit(cache=True, inline="always")
+def _load_triangle(coords, triangles, f, tri, unit_bits):
+    """Copy triangle f (row coordinates) into tri (3, 3); returns the rows (r2a..r2b, r3a..r3b)
+    its projection's box spans and the row spacing."""
+    for k in range(3):
+        for i in range(3):
+            tri[k, i] = coords[triangles[f, k], i]
+    r2a, r2b, unit = _row_range(min(tri[0, 1], tri[1, 1], tri[2, 1]), max(tri[0, 1], tri[1, 1], tri[2, 1]), unit_bits)
+    r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
+    return r2a, r2b, r3a, r3b, unit
 
-    Two passes over the same loop: with ``counts`` (len F) it only counts each triangle's hits;
-    otherwise it writes them from offsets[f] on (count, prefix sum, fill: each thread owns its
-    triangles' slots).
-    """
-    counting = counts.shape[0] > 0
+
+@nb.njit(cache=True, inline="always")
+def _column_rows(tri, r2, unit, r3a, r3b):
+    """The rows r3 (first..last, empty if last < first) of column r2 near the projection's span
+    there: a row of margin covers the rounding of the float span; the exact test decides each."""
+    z_lo, z_hi = _column_span(tri, r2 * unit)
+    if z_lo > z_hi:
+        return np.int64(1), np.int64(0)
+    return max(r3a, np.int64(np.floor(z_lo / unit)) - 1), min(r3b, np.int64(np.ceil(z_hi / unit)) + 1)
+
+
+@nb.njit(cache=True, parallel=True)
+def _row_hit_bounds(coords, triangles, unit_bits, bounds):
+    """bounds[f] = the number of rows _row_hits tests for triangle f, at least its hits."""
     n = triangles.shape[0]
     n_chunks = min(n, _ROW_HIT_CHUNKS)
     for chunk in nb.prange(n_chunks):
         tri = np.empty((3, 3), dtype=np.int64)
         for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            for k in range(3):
-                for i in range(3):
-                    tri[k, i] = coords[triangles[f, k], i]
-            r2a, r2b, unit = _row_range(min(tri[0, 1], tri[1, 1], tri[2, 1]), max(tri[0, 1], tri[1, 1], tri[2, 1]), unit_bits)
-            r3a, r3b, unit = _row_range(min(tri[0, 2], tri[1, 2], tri[2, 2]), max(tri[0, 2], tri[1, 2], tri[2, 2]), unit_bits)
-            k = 0 if counting else offsets[f]
+            r2a, r2b, r3a, r3b, unit = _load_triangle(coords, triangles, f, tri, unit_bits)
+            b = 0
             for r2 in range(r2a, r2b + 1):
-                # Only the rows near the projection's span in this column (a row of margin
-                # covers the rounding of the float span); the exact test decides each.
-                z_lo, z_hi = _column_span(tri, r2 * unit)
-                if z_lo > z_hi:
-                    continue
-                first = max(r3a, np.int64(np.floor(z_lo / unit)) - 1)
-                last = min(r3b, np.int64(np.ceil(z_hi / unit)) + 1)
+                first, last = _column_rows(tri, r2, unit, r3a, r3b)
+                b += max(last - first + 1, 0)
+            bounds[f] = b
+
+
+@nb.njit(cache=True, parallel=True)
+def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, counts):
+    """Crossings of every triangle (vertex ids (F, 3) into coords (V, 3), row coordinates)
+    with the rows its projection covers, written from offsets[f] on (room for _row_hit_bounds'
+    bound: each thread owns its triangles' slots); counts[f] = the number written."""
+    n = triangles.shape[0]
+    n_chunks = min(n, _ROW_HIT_CHUNKS)
+    for chunk in nb.prange(n_chunks):
+        tri = np.empty((3, 3), dtype=np.int64)
+        for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            r2a, r2b, r3a, r3b, unit = _load_triangle(coords, triangles, f, tri, unit_bits)
+            k = offsets[f]
+            for r2 in range(r2a, r2b + 1):
+                first, last = _column_rows(tri, r2, unit, r3a, r3b)
                 for r3 in range(first, last + 1):
                     hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
                     if not hit:
                         continue
-                    if not counting:
-                        j, frac = _cell_of(tri, t, wa, wb, wc, dd, unit_bits)
-                        keys[k] = _pack(r2, r3, j)
-                        fracs[k] = frac
-                        # Projection orientation +1 means the normal points along +d: the row leaves the solid.
-                        signs[k] = -s
-                        faces[k] = f
+                    j, frac = _cell_of(tri, t, wa, wb, wc, dd, unit_bits)
+                    keys[k] = _pack(r2, r3, j)
+                    fracs[k] = frac
+                    # Projection orientation +1 means the normal points along +d: the row leaves the solid.
+                    signs[k] = -s
+                    faces[k] = f
                     k += 1
-            if counting:
-                counts[f] = k
+            counts[f] = k - offsets[f]
+
+
+@nb.njit(cache=True)
+def _written_slots(offsets, counts):
+    """Indices (sum counts,) of the slots _row_hits wrote, in order."""
+    out = np.empty(counts.sum(), dtype=np.int64)
+    m = 0
+    for f in range(counts.shape[0]):
+        for k in range(offsets[f], offsets[f] + counts[f]):
+            out[m] = k
+            m += 1
+    return out
 
 
 @dataclass(frozen=True)
@@ -246,17 +279,21 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     coords = np.ascontiguousarray(snapped @ T.T, dtype=np.int64)
     triangles = np.ascontiguousarray(faces if face_ids is None else faces[face_ids], dtype=np.int64)
     bits = snap_bits(frame)
-    counts = np.zeros(triangles.shape[0], dtype=np.int64)
-    none_i8, none_i32 = np.empty(0, dtype=np.int8), np.empty(0, dtype=np.int32)
-    _row_hits(coords, triangles, bits, counts, counts, np.empty(0), none_i8, none_i32, counts)
-    offsets = np.zeros(counts.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts, out=offsets[1:])
-    total = int(offsets[-1])
-    keys = np.empty(total, dtype=np.int64)
-    fracs = np.empty(total, dtype=np.float64)
-    signs = np.empty(total, dtype=np.int8)
-    hit_faces = np.empty(total, dtype=np.int32)
-    _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, np.empty(0, dtype=np.int64))
+    # Count, prefix-sum, fill, with a cheap bound (the rows tested) as the count: the exact
+    # tests run once, and the unwritten slots are dropped after.
+    bounds = np.empty(triangles.shape[0], dtype=np.int64)
+    _row_hit_bounds(coords, triangles, bits, bounds)
+    offsets = np.zeros(bounds.shape[0] + 1, dtype=np.int64)
+    np.cumsum(bounds, out=offsets[1:])
+    room = int(offsets[-1])
+    keys = np.empty(room, dtype=np.int64)
+    fracs = np.empty(room, dtype=np.float64)
+    signs = np.empty(room, dtype=np.int8)
+    hit_faces = np.empty(room, dtype=np.int32)
+    counts = np.empty(triangles.shape[0], dtype=np.int64)
+    _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, counts)
+    written = _written_slots(offsets, counts)
+    keys, fracs, signs, hit_faces = keys[written], fracs[written], signs[written], hit_faces[written]
     if face_ids is not None:
         hit_faces = face_ids[hit_faces].astype(np.int32)
     order = np.argsort(keys, kind="stable")
