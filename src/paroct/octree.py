@@ -217,6 +217,41 @@ def triangle_meets_cube(tri, lo, side):
 
 
 @nb.njit(cache=True, inline="always")
+def _slab_span(tri, a, b, a0, a1):
+    """(lowest, highest) coordinate b of the triangle's projection on coordinates a, b within
+    the slab a0 <= a <= a1; (inf, -inf) if it misses the slab."""
+    lo, hi = np.inf, -np.inf
+    for i in range(3):
+        if a0 <= tri[i, a] <= a1:
+            lo = min(lo, tri[i, b])
+            hi = max(hi, tri[i, b])
+        j = (i + 1) % 3
+        pa, pb, qa, qb = tri[i, a], tri[i, b], tri[j, a], tri[j, b]
+        for wall in (a0, a1):
+            if min(pa, qa) < wall < max(pa, qa):
+                x = pb + (qb - pb) * ((wall - pa) / (qa - pa))
+                lo = min(lo, x)
+                hi = max(hi, x)
+    return lo, hi
+
+
+@nb.njit(cache=True, inline="always")
+def _plane_span(normal, offset, a, b, k, pa0, pb0, side, widen):
+    """(lowest, highest) coordinate k of the plane normal . x = offset over the square
+    [pa0 - widen, pa0 + side + widen] x [pb0 - widen, pb0 + side + widen] of coordinates a, b
+    (normal[k] != 0)."""
+    zmin, zmax = np.inf, -np.inf
+    for da in range(2):
+        for db in range(2):
+            pa = pa0 + da * side + (2 * da - 1) * widen
+            pb = pb0 + db * side + (2 * db - 1) * widen
+            z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
+            zmin = min(zmin, z)
+            zmax = max(zmax, z)
+    return zmin, zmax
+
+
+@nb.njit(cache=True, inline="always")
 def _append_cell(out, out_faces, m, cell, cell_bits, f):
     """Write the key of ``cell`` (cell coordinates (3,)) and face f at slot m, doubling the
     arrays when full; returns them."""
@@ -275,17 +310,17 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
         steep = abs(normal[k]) > 0.0
         offset = normal[0] * tri[0, 0] + normal[1] * tri[0, 1] + normal[2] * tri[0, 2]
         for ca in range(max(c0[a], 0), c1[a] + 1):
-            for cb in range(max(c0[b], 0), c1[b] + 1):
+            # Only the columns the triangle's projection meets in this slab of a (widened as
+            # the cells are): a long slanted triangle covers a small part of its box.
+            cb0, cb1 = max(c0[b], 0), c1[b]
+            if c1[a] - c0[a] > 1 and c1[b] - c0[b] > 1:
+                b_lo, b_hi = _slab_span(tri, a, b, ca * side - 2 * margin, (ca + 1) * side + 2 * margin)
+                cb0 = max(cb0, np.int64(np.floor((b_lo - 2 * margin) / side)))
+                cb1 = min(cb1, np.int64(np.floor((b_hi + 2 * margin) / side)))
+            for cb in range(cb0, cb1 + 1):
                 k0, k1 = max(c0[k], 0), c1[k]
                 if steep:
-                    zmin, zmax = np.inf, -np.inf
-                    for da in range(2):
-                        for db in range(2):
-                            pa = (ca + da) * side + (2 * da - 1) * 2 * margin
-                            pb = (cb + db) * side + (2 * db - 1) * 2 * margin
-                            z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
-                            zmin = min(zmin, z)
-                            zmax = max(zmax, z)
+                    zmin, zmax = _plane_span(normal, offset, a, b, k, ca * side, cb * side, side, 2 * margin)
                     k0 = max(k0, np.int64(np.floor((zmin - 2 * margin) / side)))
                     k1 = min(k1, np.int64(np.floor((zmax + 2 * margin) / side)))
                 for ck in range(k0, k1 + 1):
