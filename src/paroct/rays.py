@@ -198,35 +198,28 @@ def _column_rows(tri, r2, unit, r3a, r3b):
 
 
 @nb.njit(cache=True, parallel=True)
-def _row_hit_bounds(coords, triangles, unit_bits, bounds):
-    """bounds[f] = the number of rows _row_hits tests for triangle f, at least its hits."""
-    n = triangles.shape[0]
-    n_chunks = min(n, _ROW_HIT_CHUNKS)
-    for chunk in nb.prange(n_chunks):
-        tri = np.empty((3, 3), dtype=np.int64)
-        for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            r2a, r2b, r3a, r3b, unit = _load_triangle(coords, triangles, f, tri, unit_bits)
-            b = 0
-            for r2 in range(r2a, r2b + 1):
-                first, last = _column_rows(tri, r2, unit, r3a, r3b)
-                b += max(last - first + 1, 0)
-            bounds[f] = b
-
-
-@nb.njit(cache=True, parallel=True)
 def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, counts):
     """Crossings of every triangle (vertex ids (F, 3) into coords (V, 3), row coordinates)
-    with the rows its projection covers, written from offsets[f] on (room for _row_hit_bounds'
-    bound: each thread owns its triangles' slots); counts[f] = the number written."""
+    with the rows its projection covers.
+
+    Two passes over the same loop (count, prefix sum, fill: each thread owns its triangles'
+    slots).  With empty offsets, counts[f] = the rows tested for triangle f, a cheap bound on
+    its hits; otherwise its hits are written from offsets[f] on and counts[f] = their number.
+    """
+    bounding = offsets.shape[0] == 0
     n = triangles.shape[0]
     n_chunks = min(n, _ROW_HIT_CHUNKS)
     for chunk in nb.prange(n_chunks):
         tri = np.empty((3, 3), dtype=np.int64)
         for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
             r2a, r2b, r3a, r3b, unit = _load_triangle(coords, triangles, f, tri, unit_bits)
-            k = offsets[f]
+            start = 0 if bounding else offsets[f]
+            k = start
             for r2 in range(r2a, r2b + 1):
                 first, last = _column_rows(tri, r2, unit, r3a, r3b)
+                if bounding:
+                    k += max(last - first + 1, 0)
+                    continue
                 for r3 in range(first, last + 1):
                     hit, s, t, wa, wb, wc, dd = _hit(tri, r2, r3, unit)
                     if not hit:
@@ -238,7 +231,7 @@ def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, 
                     signs[k] = -s
                     faces[k] = f
                     k += 1
-            counts[f] = k - offsets[f]
+            counts[f] = k - start
 
 
 @nb.njit(cache=True)
@@ -293,7 +286,8 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     # Count, prefix-sum, fill, with a cheap bound (the rows tested) as the count: the exact
     # tests run once, and the unwritten slots are dropped after.
     bounds = np.empty(triangles.shape[0], dtype=np.int64)
-    _row_hit_bounds(coords, triangles, bits, bounds)
+    none_i8, none_i32, none_i64 = np.empty(0, dtype=np.int8), np.empty(0, dtype=np.int32), np.empty(0, dtype=np.int64)
+    _row_hits(coords, triangles, bits, none_i64, none_i64, np.empty(0), none_i8, none_i32, bounds)
     offsets = np.zeros(bounds.shape[0] + 1, dtype=np.int64)
     np.cumsum(bounds, out=offsets[1:])
     room = int(offsets[-1])
