@@ -236,22 +236,6 @@ def _slab_span(tri, a, b, a0, a1):
 
 
 @nb.njit(cache=True, inline="always")
-def _plane_span(normal, offset, a, b, k, pa0, pb0, side, widen):
-    """(lowest, highest) coordinate k of the plane normal . x = offset over the square
-    [pa0 - widen, pa0 + side + widen] x [pb0 - widen, pb0 + side + widen] of coordinates a, b
-    (normal[k] != 0)."""
-    zmin, zmax = np.inf, -np.inf
-    for da in range(2):
-        for db in range(2):
-            pa = pa0 + da * side + (2 * da - 1) * widen
-            pb = pb0 + db * side + (2 * db - 1) * widen
-            z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
-            zmin = min(zmin, z)
-            zmax = max(zmax, z)
-    return zmin, zmax
-
-
-@nb.njit(cache=True, inline="always")
 def _append_cell(out, out_faces, m, cell, cell_bits, f):
     """Write the key of ``cell`` (cell coordinates (3,)) and face f at slot m, doubling the
     arrays when full; returns them."""
@@ -320,7 +304,14 @@ def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
             for cb in range(cb0, cb1 + 1):
                 k0, k1 = max(c0[k], 0), c1[k]
                 if steep:
-                    zmin, zmax = _plane_span(normal, offset, a, b, k, ca * side, cb * side, side, 2 * margin)
+                    zmin, zmax = np.inf, -np.inf
+                    for da in range(2):
+                        for db in range(2):
+                            pa = (ca + da) * side + (2 * da - 1) * 2 * margin
+                            pb = (cb + db) * side + (2 * db - 1) * 2 * margin
+                            z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
+                            zmin = min(zmin, z)
+                            zmax = max(zmax, z)
                     k0 = max(k0, np.int64(np.floor((zmin - 2 * margin) / side)))
                     k1 = min(k1, np.int64(np.floor((zmax + 2 * margin) / side)))
                 for ck in range(k0, k1 + 1):

@@ -298,12 +298,13 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     counts = np.empty(triangles.shape[0], dtype=np.int64)
     _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, counts)
     written = _written_slots(offsets, counts)
-    keys, fracs, signs, hit_faces = keys[written], fracs[written], signs[written], hit_faces[written]
+    order = written[np.argsort(keys[written], kind="stable")]
+    # Ties break on the position in faces[face_ids], the same order as on faces (ascending ids).
+    _order_cells(keys, fracs, hit_faces, order)
+    hit_faces = hit_faces[order]
     if face_ids is not None:
         hit_faces = face_ids[hit_faces].astype(np.int32)
-    order = np.argsort(keys, kind="stable")
-    _order_cells(keys, fracs, hit_faces, order)
-    return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces[order])
+    return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces)
 
 
 @nb.njit(cache=True)
