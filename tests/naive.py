@@ -326,3 +326,11 @@ def star_violation(lattice_points, coords, tets, inside, cuts, targets, star, bo
     if out.shape[0] == 0:
         return 0.0
     return float(max(0.0, (bound[0] - q.min_dihedral).max(), (q.max_dihedral - bound[1]).max()))
+
+
+def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of the queries with no point within radius: every pair measured."""
+    if points.shape[0] == 0:
+        return np.ones(queries.shape[0], dtype=bool)
+    d = np.sqrt(((queries[:, None, :] - points[None, :, :]) ** 2).sum(axis=2))
+    return d.min(axis=1) > radius

@@ -6,7 +6,8 @@ import manifold3d
 import numpy as np
 import pytest
 
-from paroct.check import check_mesh, distances_to_triangles, point_triangle_distance, sample_triangles
+from paroct.check import (check_mesh, distances_to_triangles, far_from_points, point_triangle_distance,
+                          sample_triangles)
 from paroct.errors import ParoctError
 from paroct.lattice import leaf_tets
 from paroct.surface import load_surface
@@ -282,3 +283,25 @@ def test_surface_edge_counts_match_a_dictionary_twin(seed):
     faces = np.concatenate([faces[rng.random(len(faces)) < 0.9], faces[: 5 * seed]])
     topo = surface_topology(faces, len(points))
     assert (topo.n_edges, topo.n_vertices, topo.bad_edges) == naive.surface_edges(faces)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_far_from_points_matches_all_pairs(seed):
+    rng = np.random.default_rng(seed)
+    points = rng.random((300, 3)) * [4.0, 1.0, 0.01]  # one thin axis: many points per cell
+    queries = np.concatenate([rng.random((400, 3)) * [5.0, 1.5, 1.0] - 0.2, points[:20] + [0.1, 0, 0]])
+    radius = [0.05, 0.1, 0.3, 2.0][seed]
+    assert np.array_equal(far_from_points(queries, points, radius), naive.far_from_points(queries, points, radius))
+
+
+def test_far_from_points_degenerate_inputs():
+    grid = np.stack(np.meshgrid(*[np.arange(4.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    # Queries exactly one radius from a grid point count as near (distance <= radius).
+    queries = grid + [1.0, 0.0, 0.0]
+    assert not far_from_points(queries, grid, 1.0).any()
+    assert np.array_equal(far_from_points(grid + 0.5, grid, 0.5), naive.far_from_points(grid + 0.5, grid, 0.5))
+    assert far_from_points(queries, np.zeros((0, 3)), 1.0).all()
+    one = np.array([[1e8, -1e8, 3.0]])  # one point, far from the origin: a 1-cell grid
+    assert np.array_equal(far_from_points(one + [[0, 0, 0.5], [0, 0, 2]], one, 1.0), [False, True])
+    with pytest.raises(ValueError, match="radius"):
+        far_from_points(queries, grid, 0.0)

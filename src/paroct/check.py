@@ -218,6 +218,56 @@ def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.
     return out
 
 
+@nb.njit(cache=True)
+def _far_from(queries, points, origin, cell, radius, order, keys, dims):
+    r2 = radius * radius
+    out = np.zeros(queries.shape[0], dtype=np.bool_)
+    c = np.empty(3, dtype=np.int64)
+    for q in range(queries.shape[0]):
+        for k in range(3):
+            c[k] = np.int64(math.floor((queries[q, k] - origin[k]) / cell))
+        near = False
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                for dk in range(-1, 2):
+                    i, j, k = c[0] + di, c[1] + dj, c[2] + dk
+                    if near or not (0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]):
+                        continue
+                    key = (i * dims[1] + j) * dims[2] + k
+                    s = np.searchsorted(keys, key)
+                    while s < keys.shape[0] and keys[s] == key:
+                        p = order[s]
+                        d = 0.0
+                        for a in range(3):
+                            d += (points[p, a] - queries[q, a]) ** 2
+                        if d <= r2:
+                            near = True
+                            break
+                        s += 1
+        out[q] = not near
+    return out
+
+
+def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+    """Mask (Q,) of the query points (Q, 3) with no point of ``points`` (P, 3) within
+    ``radius`` (Euclidean, model units).  A uniform grid of cells of side at least radius
+    (at most 2**20 per axis): each query scans the points of its 27 surrounding cells, which
+    hold every point within radius."""
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    if not radius > 0:
+        raise ValueError(f"radius = {radius}: must be positive")
+    if points.shape[0] == 0:
+        return np.ones(queries.shape[0], dtype=bool)
+    origin = points.min(axis=0)
+    cell = max(float(radius), float((points.max(axis=0) - origin).max()) / 2**20)
+    cells = np.floor((points - origin) / cell).astype(np.int64)
+    dims = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+    order = np.argsort(keys, kind="stable")
+    return _far_from(queries, points, origin, cell, float(radius), order, keys[order], dims)
+
+
 def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int = 3, seed: int = 0) -> np.ndarray:
     """Points (S, 3) on triangles: every used vertex, every centroid, and ``per_triangle``
     uniformly random points per triangle (numpy Generator with ``seed``, so repeatable)."""
