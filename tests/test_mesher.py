@@ -126,6 +126,9 @@ def test_thin_solid_warns_or_fails_with_advice_when_refinement_is_off():
     plate = manifold3d.Manifold.cube([1.0, 1.0, 0.02])
     with pytest.raises(ParoctError, match=r"thinnest wall 0\.02"):
         mesh(plate, size=0.05, thin_features=False)
+    # Thicker, a few scraps survive: less than half the volume is an error too, not a mesh.
+    with pytest.raises(ParoctError, match=r"keeps only 0\.43% of the solid's volume; thinnest wall 0\.035"):
+        mesh(manifold3d.Manifold.cube([1.0, 1.0, 0.035]).rotate([23, 41, 67]), size=0.05, thin_features=False)
     # A block with a thin fin: the fin is lost, and the warning says so with a size that keeps it.
     result = mesh(_FIN_PART, size=0.1, thin_features=False)
     assert result.report.warnings and "thinnest wall" in result.report.warnings[0]
@@ -157,6 +160,52 @@ def test_min_size_floor_is_reported_in_one_line():
     rep = result.report
     assert rep.size == pytest.approx(0.05)
     assert len(rep.warnings) == 1 and "min_size = 0.05 reached" in rep.warnings[0] and "thinnest wall" in rep.warnings[0]
+
+
+_ROD_PART = (manifold3d.Manifold.cube([1.0, 1.0, 0.2])
+             + manifold3d.Manifold.cylinder(1.0, 0.0035, 0.0035, 16).translate([0.5, 0.5, 0.2]))
+
+
+def test_a_rod_thinner_than_the_lattice_is_reported_then_kept():
+    # The rod (0.007 across, size/6.6 at diag/40) changes neither topology nor volume (0.02 %)
+    # when stuffing drops it: only the surface vertices the boundary misses tell.
+    surface = load_surface(_ROD_PART)
+    dropped = mesh(surface, divisions=40, thin_features=False).report
+    assert dropped.missed_vertices.size > 0 and abs(dropped.volume_error) < 0.01
+    assert (dropped.boundary_components, dropped.boundary_genus) == (1, 0)
+    assert len(dropped.warnings) == 1 and "misses" in dropped.warnings[0]
+    tip = surface.vertices[:, 2] > 1.2 - 1e-9
+    assert np.all(np.isin(np.flatnonzero(tip), dropped.missed_vertices))
+    # By default the band is refined along the rod (around the triangles at the missed vertices,
+    # not only where a lattice row happened to cross it) until it is kept.
+    result = mesh(surface, divisions=40)
+    rep = result.report
+    assert not rep.warnings and rep.missed_vertices.size == 0 and abs(rep.volume_error) < 0.01
+    assert result.mesh.points[:, 2].max() > 1.2 - 0.01
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+
+
+def test_a_shell_between_the_lattice_rows_is_kept():
+    # A cube of side 0.0066 (size/9 at diag/40) one unit away from a unit cube: no lattice row
+    # crosses it, so only the missed surface vertices say where to refine.
+    surface = load_surface(manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+                           + manifold3d.Manifold.cube([0.0066] * 3).translate([2.0, 0.5, 0.5]))
+    result = mesh(surface, divisions=40)
+    rep = result.report
+    assert not rep.warnings and rep.missed_vertices.size == 0
+    assert (rep.boundary_components, rep.boundary_genus) == (2, 0) and abs(rep.volume_error) < 0.01
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+
+
+def test_a_filled_gap_counts_as_a_loss():
+    # A slot 0.028 wide and 0.7 deep through a unit cube, at diag/20: stuffing fills it and the
+    # mesh gains volume (found by fuzzing: only losses were reported).
+    slotted = manifold3d.Manifold.cube([1.0, 1.0, 1.0]) - manifold3d.Manifold.cube([2.0, 0.028, 0.8]).translate([-0.5, 0.5, -0.1])
+    rep = mesh(slotted, divisions=20, thin_features=False).report
+    assert rep.volume_error > 0.01
+    assert len(rep.warnings) == 1 and "gained" in rep.warnings[0] and "thinnest gap 0.028" in rep.warnings[0]
+    rep = mesh(slotted, divisions=20).report
+    assert not rep.warnings and abs(rep.volume_error) < 0.01
 
 
 def test_size_checks():

@@ -64,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="largest long edge inside, rounded down to size * 2^k (default 8 x size)")
     grading.add_argument("--uniform", action="store_true", help="one size everywhere (max size = size)")
     m.add_argument("--min-size", type=float, metavar="H",
-                   help="smallest boundary size that thin walls and gaps may ask for (default size / 8)")
+                   help="smallest boundary size that thin walls and gaps may ask for (default size / 16)")
     m.add_argument("--keep-size", action="store_true",
                    help="do not refine for thin walls and gaps (only warn when the mesh loses them)")
     m.add_argument("--refine-box", type=float, nargs=7, action="append", default=[],

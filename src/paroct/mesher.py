@@ -14,6 +14,7 @@ import numba as nb
 import numpy as np
 
 from . import rays
+from .check import far_from_points
 from .errors import ParoctError
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
@@ -90,6 +91,7 @@ class MeshReport:
     unresolved_cuts: int = 0
     repaired_tets: int = 0
     bad_tets: int = 0
+    missed_vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     stage_seconds: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     notes: list = field(default_factory=list)
@@ -177,14 +179,17 @@ def mesh(
     max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
     a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
     evaluated at octant corners and centres (both are clamped to at least size).
-    thin_features: when the mesh loses topology (boundary components, genus) or more than 1 %
-    of the volume, the solid is meshed again with the boundary refined only near the walls and
-    gaps thinner than 2 * size, to two element layers across each (down to min_size, default
-    size / 8), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
+    thin_features: when the mesh loses topology (boundary components, genus), loses or gains
+    more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
+    thinner than the lattice dropped), the solid is meshed again with the boundary refined
+    only near the walls and gaps thinner than 2 * size and the missed parts, to two element
+    layers across each (first at most size / 8, then deeper while it still loses, down to
+    min_size, default size / 16), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
     (and near needles, 3r/R below NEEDLE_RATIO) and the band refined where they do not mend
     an angle; if that does not keep the solid, the whole boundary size shrinks by halves
-    instead, as far as max_memory allows.  The report's notes say what was done.  False
-    keeps size and only warns.  max_memory: bytes the run may use (default: the machine's
+    instead, as far as max_memory allows (not below size / 8 unless min_size is given).  The
+    report's notes say what was done.  False keeps size and only warns.  A mesh that keeps
+    less than half the solid's volume raises ParoctError, as one with no tets does.  max_memory: bytes the run may use (default: the machine's
     available memory); a size that would need more is refused before any work.  progress:
     called with each stage's name when it ends.
     """
@@ -195,6 +200,7 @@ def mesh(
     floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else float(min_size)
     if not (np.isfinite(floor) and floor > 0):
         raise ParoctError(f"min_size = {min_size}: must be a positive number")
+    whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
     budget = _available_memory() if max_memory is None else int(max_memory)
     _check_memory(surface, field, budget)
     loaded = time.perf_counter() - t0
@@ -215,10 +221,10 @@ def mesh(
             if why:
                 notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
         finer = band
-        if walls is not None and walls.thickness.size:
-            while finer > walls.thickness.min() / 2:
+        if walls is not None and np.any(walls.thickness > 0):
+            while finer > walls.thickness[walls.thickness > 0].min() / 2 and finer > whole_floor:
                 finer /= 2
-        finer = max(min(finer, band / 2), floor)
+        finer = max(min(finer, band / 2), whole_floor)
         while finer < band * (1 - 1e-9) and not _fits(surface, field, finer, budget):
             finer, memory_bound = finer * 2, True
         if not (thin_features and lost and finer < band * (1 - 1e-9)):
@@ -229,9 +235,14 @@ def mesh(
     if lost:
         if report.n_tets == 0:
             raise ParoctError(f"no tets: the solid is thinner than size = {band:.4g} everywhere; {advice}")
+        if report.volume_error < -LOST_TOO_MUCH:
+            raise ParoctError(f"the mesh at boundary size {band:.4g} keeps only {100 * (1 + report.volume_error):.2g}% "
+                              f"of the solid's volume; {advice}")
         floor_text = ""
         if thin_features and band <= floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached; "
+        elif thin_features and band <= whole_floor * (1 + 1e-9):
+            floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
         elif thin_features and memory_bound:
             floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
         report.warnings.append(f"{floor_text}{lost}; {advice}")
@@ -252,8 +263,9 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         return None, ""
     notes = [f"at boundary size {field.size:.4g} {lost}"]
     framed = None
-    for extra in range(max_depth):
-        points, depth = _thin_asks(coarse, walls, max_depth, extra)
+    cap = min(max_depth, WHOLE_BAND_DEPTH)
+    for extra in range(2 * max_depth + 1):
+        points, depth = _thin_asks(coarse, walls, cap, extra)
         if depth.size == 0:
             return None, ""
         frame = _refined_frame(coarse, int(depth.max()))
@@ -289,23 +301,32 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         if result is None:
             return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
                           f"degrees after {rounds} measure-and-refine rounds")
-        thinnest = int(np.argmin(walls.thickness))
         layers = f", {extra} level{'s' * (extra > 1)} finer than two layers need" if extra else ""
+        measured = np.flatnonzero(walls.thickness > 0)  # the others are surface the boundary missed
+        thinnest = measured[np.argmin(walls.thickness[measured])] if measured.size else -1
+        what = (f"thinnest {'wall' if walls.is_wall[thinnest] else 'gap'} {walls.thickness[thinnest]:.4g}"
+                if measured.size else "parts the lattice missed")
         notes.append(f"boundary refined to {frame.h:.4g} only near the {depth.size} samples of walls and gaps thinner "
-                     f"than 2 x size (thinnest {'wall' if walls.is_wall[thinnest] else 'gap'} "
-                     f"{walls.thickness[thinnest]:.4g}{layers}), in {rounds} measure-and-refine round{'s' * (rounds > 1)}")
-        still = _losses(report)
+                     f"than 2 x size ({what}{layers}), in {rounds} measure-and-refine round{'s' * (rounds > 1)}")
+        still = _losses(report, surface)
         if not still:
             report.notes = notes
             return result, ""
         notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
-        if depth.min() >= max_depth:
-            break
+        if depth.min() >= cap:
+            if cap >= max_depth:
+                break
+            cap += 1
     return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost"
 
 
-#: Default min_size: size divided by this.
-DEFAULT_MIN_SIZE_DIVISOR = 8
+#: Default min_size: size divided by this.  Only the band near thin places goes that deep by
+#: default (walls of 1-2 x size / 8 need it: at size / 8 they come apart, session 13's fuzzing).
+DEFAULT_MIN_SIZE_DIVISOR = 16
+#: Levels below size that the first local rounds (and, unless min_size is given, the whole
+#: band) refine to at most: size / 8.  Local rounds that still lose go one level deeper each,
+#: down to min_size; parts kept at size / 8 get the same mesh as before the floor deepened.
+WHOLE_BAND_DEPTH = 3
 #: Refine for walls and gaps whose two sides face each other this squarely (unit normals' dot
 #: product below it, about 25 degrees): knife edges and wedge tips are not walls.
 THIN_FACING = -0.9
@@ -374,8 +395,8 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     targets[:n_band] = band.targets
     points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
     stages.done("stuff")
-    result = _finish(points, out_tets, inside, targets, report, stages)
-    lost = _losses(report)
+    result = _finish(points, out_tets, inside, targets, report, stages, surface, h)
+    lost = _losses(report, surface)
     advice, walls = "", None
     if lost:
         for d in range(EDGE_DIRECTIONS.shape[0]):
@@ -383,21 +404,40 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
                 crossings[d] = rays.row_crossings(frame, snapped, faces, d)
         advice = _thin_feature_advice(find_thin_features(frame, crossings, surface.vertices, faces), h)
         walls = find_thin_features(frame, crossings, surface.vertices, faces, THIN_FACING)
+        if report.missed_vertices.size:
+            walls = _with_missed_parts(walls, frame, snapped, faces, report.missed_vertices)
         stages.done("features")
     return result, lost, advice, walls
 
 
+def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
+                       missed: np.ndarray) -> ThinFeatures:
+    """walls plus samples of thickness 0 (unknown, see _thin_asks) at the centres of the
+    finest cells that the triangles around the missed surface vertices meet.  The rows
+    measure a part thinner than their spacing only where one happens to cross it (a thin rod
+    is crossed in a few places along its length), and its vertices may all lie at its ends."""
+    near = np.zeros(snapped.shape[0], dtype=bool)
+    near[missed] = True
+    around = faces[near[faces].any(axis=1)]
+    cells = surface_cells(frame, snapped, around, rays.snap_bits(frame), frame.levels)
+    points = frame.to_space(octant_lattice_anchors(cells, frame) + 0.5)
+    return ThinFeatures(np.concatenate([walls.thickness, np.zeros(points.shape[0])]),
+                        np.concatenate([walls.points, points]),
+                        np.concatenate([walls.is_wall, np.ones(points.shape[0], dtype=bool)]))
+
+
 def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
-            report: MeshReport, stages: _Stages) -> MeshResult:
+            report: MeshReport, stages: _Stages, surface: Surface, size: float) -> MeshResult:
     """Repair pinches, fill the report's quality, volume and topology, and drop unused points:
     the result of a pass.  points, out_tets: stuff's output; inside, targets (V,): over the
-    lattice vertices, points 0..V-1 of the stuffed mesh."""
+    lattice vertices, points 0..V-1 of the stuffed mesh; size: the band's longest edge."""
     core = np.zeros(points.shape[0], dtype=bool)
     core[: inside.shape[0]] = inside & (targets < 0)
     out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
     stages.done("repair")
 
     _measure(points, out_tets, core, faces_out, report)
+    _measure_misses(surface, points, faces_out, size, report)
     mesh = TetMesh(*_compact(points, out_tets))
     report.n_vertices = int(mesh.points.shape[0])
     stages.done("quality")
@@ -409,20 +449,45 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     return MeshResult(mesh, report)
 
 
+#: A surface vertex with no mesh boundary vertex within this many times the band's longest
+#: edge is missed: the boundary passes more than (MISS_REACH - 1) x size from it, since every
+#: point of a boundary triangle lies within one edge of its vertices.  Stuffing cuts sharp
+#: edges by well under one size, so only dropped parts (rods, fins, shells thinner than the
+#: lattice) and filled gaps reach this.
+MISS_REACH = 3.0
+
+
+def _measure_misses(surface: Surface, points: np.ndarray, faces: np.ndarray, size: float, report: MeshReport) -> None:
+    """The surface vertices (indices) the mesh boundary (faces (B, 3) into points) misses:
+    no boundary vertex within MISS_REACH x size."""
+    on_boundary = np.zeros(points.shape[0], dtype=bool)
+    on_boundary[faces.ravel()] = True
+    report.missed_vertices = np.flatnonzero(far_from_points(surface.vertices, points[on_boundary], MISS_REACH * size))
+
+
+#: Volume loss (relative) above which mesh() raises instead of returning the mesh with a
+#: warning: what is left is not the part.
+LOST_TOO_MUCH = 0.5
 #: Volume loss (relative) above which the mesh is said to have lost part of the solid.
 VOLUME_LOSS_WARNING = 0.01
 
 
-def _losses(report: MeshReport) -> str:
+def _losses(report: MeshReport, surface: Surface) -> str:
     """What the mesh lost against the input, as one clause, or '' if nothing."""
     lost = []
     if report.volume_error < -VOLUME_LOSS_WARNING:
         lost.append(f"the mesh lost {-100 * report.volume_error:.1f}% of the volume")
+    elif report.volume_error > VOLUME_LOSS_WARNING:
+        lost.append(f"the mesh gained {100 * report.volume_error:.1f}% of volume (a gap was filled)")
     if report.boundary_components != report.input_components or report.boundary_genus != report.input_genus:
         lost.append(
             f"the boundary has {report.boundary_components} components and genus {report.boundary_genus} "
             f"(input {report.input_components} and {report.input_genus})"
         )
+    if report.missed_vertices.size:
+        x, y, z = surface.vertices[report.missed_vertices[0]]
+        lost.append(f"the boundary misses {report.missed_vertices.size} surface vertices by more than "
+                    f"{MISS_REACH - 1:g} x size, e.g. ({x:.6g}, {y:.6g}, {z:.6g}) (a part thinner than the lattice was dropped)")
     return " and ".join(lost)
 
 
@@ -469,7 +534,9 @@ def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int
     layers across every wall or gap thinner than 2 h (one more level per ``extra``), at most
     max_depth."""
     thin = walls.thickness < 2 * coarse.h
-    depth = np.ceil(np.log2(2 * coarse.h / np.maximum(walls.thickness[thin], 1e-300)) - 1e-9).astype(np.int64)
+    thickness = walls.thickness[thin]
+    # Thickness 0 is unknown (parts the boundary missed, _with_missed_parts): one level to start.
+    depth = np.ceil(np.log2(2 * coarse.h / np.where(thickness > 0, thickness, coarse.h)) - 1e-9).astype(np.int64)
     depth = np.clip(depth + extra, 1, max_depth)
     return coarse.to_lattice(walls.points[thin]), depth
 
@@ -591,7 +658,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     if window is not None:
         stages.done("quality")
         return None, asks
-    return _finish(points, out_tets, inside, targets, report, stages), asks
+    return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
 
 
 def _outside_bound(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
