@@ -38,6 +38,13 @@ def _write_surface(path, vertices=None, faces=None):
     return path
 
 
+def _binary_box_bytes(tmp_path):
+    path = tmp_path / "binary_box.stl"
+    vertices, faces = _surface_arrays()
+    meshio.write(path, meshio.Mesh(vertices, [("triangle", faces)]), binary=True)
+    return path.read_bytes()
+
+
 def _block(n=2):
     g = np.arange(n)
     anchors = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -180,6 +187,10 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", _inside_out_box(t)], r"negative volume \(volume = -0.48, inside out\?\)"),
         (lambda t, s: ["mesh", _written(t / "cut.stl", b"solid x\nfacet normal 0 0 1\n")], "cannot read .* as STL"),
         (lambda t, s: ["mesh", _written(t / "none.stl", bytes(84))], "empty surface"),
+        (lambda t, s: ["mesh", _written(t / "cut.stl", _binary_box_bytes(t)[:-30])],
+         r"cannot read .*cut.stl as STL: neither ASCII STL .* complete binary STL: 654 bytes, its header says 12 triangles \(84 \+ 50 x 12 = 684 bytes\)"),
+        (lambda t, s: ["mesh", _written(t / "noise.stl", np.random.default_rng(0).bytes(1000))], "not an STL file"),
+        (lambda t, s: ["mesh", _written(t / "tiny.stl", b"\x00\x01")], "neither ASCII STL .* 2 bytes;"),
         (lambda t, s: ["mesh", s, "--size", "0"], "size = 0"),
         (lambda t, s: ["mesh", s, "--size", "-1"], "size = -1"),
         (lambda t, s: ["mesh", s, "--size", "nan"], "size = nan"),

@@ -115,7 +115,8 @@ _STL_FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("at
 
 def _read_binary_stl(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
     """Triangle soup (3F corners (3F, 3) float64, faces (F, 3) int64) of a binary STL, or None
-    if the file is not one (its size is not 84 + 50 F for the F in its header: ASCII STL).
+    if the file is text that may be ASCII STL.  ParoctError if it is neither: binary, but
+    shorter than 84 + 50 F bytes for the F in its header (truncated, or not an STL).
 
     Read straight into numpy: meshio's STL reader merges the corners with a row-wise
     np.unique that took half a second on an 86 k-triangle part; _weld merges them later anyway.
@@ -123,14 +124,27 @@ def _read_binary_stl(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
     size = path.stat().st_size
     with open(path, "rb") as fh:
         head = fh.read(84)
-        if len(head) < 84:
-            return None
-        n = int(np.frombuffer(head, dtype="<u4", count=1, offset=80)[0])
+        n = int(np.frombuffer(head, dtype="<u4", count=1, offset=80)[0]) if len(head) == 84 else -1
         if size != 84 + 50 * n:
-            return None
+            if _looks_like_text(head + fh.read(428)):
+                return None
+            if n < 0 or size < 84 + 50 * n:
+                have = f"{size} bytes" if n < 0 else f"{size} bytes, its header says {n} triangles (84 + 50 x {n} = {84 + 50 * n} bytes)"
+                raise ParoctError(f"neither ASCII STL (text starting with 'solid') nor a complete "
+                                  f"binary STL: {have}; truncated or not an STL file")
+        # Bytes past the last facet (some exporters pad) are ignored, as other readers do.
+        fh.seek(84)
         facets = np.fromfile(fh, dtype=_STL_FACET, count=n)
     corners = facets["corners"].reshape(-1, 3).astype(np.float64)
     return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
+
+
+def _looks_like_text(start: bytes) -> bool:
+    """Whether a file starting with these bytes may be ASCII STL: 'solid' after optional
+    whitespace, and no NUL or other control bytes but whitespace."""
+    if not start.lstrip().lower().startswith(b"solid"):
+        return False
+    return not any(b < 9 or 13 < b < 32 for b in start)
 
 
 def _edge_report(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int]:
