@@ -227,23 +227,22 @@ def _far_from(queries, points, origin, cell, radius, order, keys, dims):
         for k in range(3):
             c[k] = np.int64(math.floor((queries[q, k] - origin[k]) / cell))
         near = False
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                for dk in range(-1, 2):
-                    i, j, k = c[0] + di, c[1] + dj, c[2] + dk
-                    if near or not (0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]):
-                        continue
-                    key = (i * dims[1] + j) * dims[2] + k
-                    s = np.searchsorted(keys, key)
-                    while s < keys.shape[0] and keys[s] == key:
-                        p = order[s]
-                        d = 0.0
-                        for a in range(3):
-                            d += (points[p, a] - queries[q, a]) ** 2
-                        if d <= r2:
-                            near = True
-                            break
-                        s += 1
+        for n in range(27):  # the query's own cell first: most queries have a point there
+            m = (n + 13) % 27
+            i, j, k = c[0] + m // 9 - 1, c[1] + m // 3 % 3 - 1, c[2] + m % 3 - 1
+            if near or not (0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]):
+                continue
+            key = (i * dims[1] + j) * dims[2] + k
+            s = np.searchsorted(keys, key)
+            while s < keys.shape[0] and keys[s] == key:
+                p = order[s]
+                d = 0.0
+                for a in range(3):
+                    d += (points[p, a] - queries[q, a]) ** 2
+                if d <= r2:
+                    near = True
+                    break
+                s += 1
         out[q] = not near
     return out
 
@@ -259,13 +258,33 @@ def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> n
         raise ValueError(f"radius = {radius}: must be positive")
     if points.shape[0] == 0:
         return np.ones(queries.shape[0], dtype=bool)
-    origin = points.min(axis=0)
-    cell = max(float(radius), float((points.max(axis=0) - origin).max()) / 2**20)
-    cells = np.floor((points - origin) / cell).astype(np.int64)
-    dims = cells.max(axis=0) + 1
-    keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+    origin, cell, keys, dims = _grid_cells(points, float(radius))
     order = np.argsort(keys, kind="stable")
     return _far_from(queries, points, origin, cell, float(radius), order, keys[order], dims)
+
+
+@nb.njit(cache=True)
+def _grid_cells(points, radius):
+    """The grid of far_from_points: its origin (3,), cell side, each point's cell key (P,)
+    (row-major over dims) and dims (3,).  numpy's reductions along axis 0 of an (P, 3) array
+    took longer than the whole query."""
+    lo = points[0].copy()
+    hi = points[0].copy()
+    for p in range(points.shape[0]):
+        for a in range(3):
+            lo[a] = min(lo[a], points[p, a])
+            hi[a] = max(hi[a], points[p, a])
+    cell = max(radius, (hi - lo).max() / 2**20)
+    dims = np.empty(3, dtype=np.int64)
+    for a in range(3):
+        dims[a] = np.int64(math.floor((hi[a] - lo[a]) / cell)) + 1
+    keys = np.empty(points.shape[0], dtype=np.int64)
+    for p in range(points.shape[0]):
+        key = 0
+        for a in range(3):
+            key = key * dims[a] + min(np.int64(math.floor((points[p, a] - lo[a]) / cell)), dims[a] - 1)
+        keys[p] = key
+    return lo, cell, keys, dims
 
 
 def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int = 3, seed: int = 0) -> np.ndarray:
