@@ -309,6 +309,20 @@ def test_match_faces_matches_a_dictionary(seed):
     assert np.array_equal(got[0], want[0])
 
 
+@pytest.mark.parametrize("name", ["angle_block", "bunny", "shell"])
+def test_solid_tets_bounds_the_tets_made_and_is_near_them(name):
+    from paroct.mesher import solid_tets
+
+    if name == "shell":  # walls two sizes thick: the band estimate counts both sides of each
+        shell = manifold3d.Manifold.cube([1.0, 1.0, 1.0], True) - manifold3d.Manifold.cube([0.9, 0.9, 0.9], True)
+        surface, h = load_surface(shell.rotate([23.0, 41.0, 67.0])), 0.025
+    else:
+        surface = load_surface(DATA / f"{name}.stl")
+        h = surface.diagonal / 30
+    made = mesh(surface, size=h, max_size=h, thin_features=False).report.n_tets
+    assert made <= solid_tets(surface, h) <= 2.5 * made
+
+
 def test_refinement_stops_where_memory_ends_and_says_so():
     # At size 0.1 the fin part fits in 10 MB; a boundary half as fine would not.
     result = mesh(_FIN_PART, size=0.1, max_memory=10 * 2**20)

@@ -111,13 +111,24 @@ class MeshResult:
 def estimate_tets(surface: Surface, field: SizeField) -> int:
     """Rough upper estimate of the lattice tets: 12 per h^3 (Freudenthal cells have volume h^3 / 2)
     in a band of BAND_CELLS * size around the surface, and 12 per max_size^3 times
-    TRANSITION_FACTOR in the rest of the box, never more than the uniform lattice of the box."""
+    TRANSITION_FACTOR in the rest of the box, never more than the uniform lattice of the box
+    nor than solid_tets at size."""
     h = field.size
     ext = surface.bbox_max - surface.bbox_min + 2 * h
     box = float(np.prod(ext))
-    uniform = 12 * box / h**3
+    uniform = min(12 * box / h**3, solid_tets(surface, h))
     graded = 12 * surface.area * BAND_CELLS / h**2 + TRANSITION_FACTOR * 12 * box / field.max_size**3
     return int(min(uniform, graded)) if not field.regions and field.function is None else int(uniform)
+
+
+def solid_tets(surface: Surface, size: float) -> float:
+    """Upper estimate of the tets of a mesh whose finest long edge is size, at least as fine
+    everywhere: 12 per size^3 of the solid's volume and 12 per size^2 of its area (the cut
+    and stuffed tets of a band about one size thick).  On the corpus at diag/40 and /80 (uniform
+    lattice) it is 1.09-2.07 x the tets made; it bounds thin shells, where a band BAND_CELLS
+    thick on both sides of every wall counts far more than the solid holds (session 14's
+    fuzzed hollow cube: 127 M estimated, 36 M made)."""
+    return 12 * surface.volume / size**3 + 12 * surface.area / size**2
 
 
 def _available_memory() -> int:
@@ -220,6 +231,7 @@ def mesh(
                 return local
             if why:
                 notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
+                memory_bound = why == LOCAL_MEMORY
         finer = band
         if walls is not None and np.any(walls.thickness > 0):
             while finer > walls.thickness[walls.thickness > 0].min() / 2 and finer > whole_floor:
@@ -241,10 +253,10 @@ def mesh(
         floor_text = ""
         if thin_features and band <= floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached; "
-        elif thin_features and band <= whole_floor * (1 + 1e-9):
-            floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
         elif thin_features and memory_bound:
             floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
+        elif thin_features and band <= whole_floor * (1 + 1e-9):
+            floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
         report.warnings.append(f"{floor_text}{lost}; {advice}")
     return result
 
@@ -277,7 +289,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
-                return None, "it would not fit in memory (max_memory)"
+                return None, LOCAL_MEMORY
             report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
                                 solid_volume=surface.volume, input_genus=surface.genus,
                                 input_components=surface.components, stage_seconds=stage_seconds)
@@ -301,7 +313,9 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         if result is None:
             return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
                           f"degrees after {rounds} measure-and-refine rounds")
-        layers = f", {extra} level{'s' * (extra > 1)} finer than two layers need" if extra else ""
+        known = walls.thickness[walls.thickness < 2 * coarse.h] > 0  # as _thin_asks picks its samples
+        beyond = int(np.max(depth - _thin_asks(coarse, walls, max_depth, 0)[1], initial=0, where=known))
+        layers = f", {beyond} level{'s' * (beyond > 1)} finer than two layers need" if beyond > 0 else ""
         measured = np.flatnonzero(walls.thickness > 0)  # the others are surface the boundary missed
         thinnest = measured[np.argmin(walls.thickness[measured])] if measured.size else -1
         what = (f"thinnest {'wall' if walls.is_wall[thinnest] else 'gap'} {walls.thickness[thinnest]:.4g}"
@@ -320,6 +334,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost"
 
 
+#: Why _thin_locally stopped when the next round would not fit in memory.
+LOCAL_MEMORY = "it would not fit in memory (max_memory)"
 #: Default min_size: size divided by this.  Only the band near thin places goes that deep by
 #: default (walls of 1-2 x size / 8 need it: at size / 8 they come apart, session 13's fuzzing).
 DEFAULT_MIN_SIZE_DIVISOR = 16
@@ -334,9 +350,11 @@ THIN_FACING = -0.9
 
 def _local_tets(surface: Surface, field: SizeField, wanted: BandLevels) -> int:
     """estimate_tets plus, for each coarse cell asked d levels finer, a band of BAND_CELLS
-    fine cells (six tets each) across the 4**d fine cells its surface meets."""
+    fine cells (six tets each) across the 4**d fine cells its surface meets; never more than
+    solid_tets at the finest size asked."""
     depth = wanted.levels.astype(np.int64) - wanted.coarse_level
-    return estimate_tets(surface, field) + int(6 * BAND_CELLS * np.sum(4.0**depth))
+    local = estimate_tets(surface, field) + int(6 * BAND_CELLS * np.sum(4.0**depth))
+    return int(min(local, solid_tets(surface, field.size / 2.0 ** int(depth.max(initial=0)))))
 
 
 def _check_memory(surface: Surface, field: SizeField, budget: int) -> None:
