@@ -274,7 +274,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     if max_depth < 1:  # min_size leaves no finer level to refine to
         return None, ""
     notes = [f"at boundary size {field.size:.4g} {lost}"]
-    framed = None
+    framed, tried = None, None
     cap = min(max_depth, WHOLE_BAND_DEPTH)
     for extra in range(2 * max_depth + 1):
         points, depth = _thin_asks(coarse, walls, cap, extra)
@@ -285,7 +285,17 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             return None, f"a frame of {frame.levels} levels is too deep"
         wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
-            framed = FramedSurface.build(surface, frame, coarse.levels)
+            framed, tried = FramedSurface.build(surface, frame, coarse.levels), None
+        # A round whose band cells are the last round's meshes the same (a deeper ask in cells
+        # the surface does not meet): skip to the next.
+        band = band_cells(frame, framed.snapped, framed.faces, rays.snap_bits(frame), framed.buckets, wanted,
+                          framed.fine_cells)
+        if tried is not None and all(np.array_equal(a, b) for a, b in zip(band, tried)):
+            cap = _next_cap(depth, cap, max_depth)
+            if cap is None:
+                break
+            continue
+        tried = band
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
@@ -327,11 +337,18 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             report.notes = notes
             return result, ""
         notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
-        if depth.min() >= cap:
-            if cap >= max_depth:
-                break
-            cap += 1
+        cap = _next_cap(depth, cap, max_depth)
+        if cap is None:
+            break
     return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost"
+
+
+def _next_cap(depth: np.ndarray, cap: int, max_depth: int) -> int | None:
+    """The depth cap of _thin_locally's next round: one level deeper once every sample's
+    depth has reached it, None once that is max_depth (no round left)."""
+    if depth.min() < cap:
+        return cap
+    return cap + 1 if cap < max_depth else None
 
 
 #: Why _thin_locally stopped when the next round would not fit in memory.
