@@ -195,14 +195,15 @@ def mesh(
     thinner than the lattice dropped), the solid is meshed again with the boundary refined
     only near the walls and gaps thinner than 2 * size and the missed parts, to two element
     layers across each (first at most size / 8, then deeper while it still loses, down to
-    min_size, default size / 16), every tet measured, other warps tried near any outside [10.7, 164.8] degrees
-    (and near needles, 3r/R below NEEDLE_RATIO) and the band refined where they do not mend
-    an angle; if that does not keep the solid, the whole boundary size shrinks by halves
-    instead, as far as max_memory allows (not below size / 8 unless min_size is given).  The
-    report's notes say what was done.  False keeps size and only warns.  A mesh that keeps
-    less than half the solid's volume raises ParoctError, as one with no tets does.  max_memory: bytes the run may use (default: the machine's
-    available memory); a size that would need more is refused before any work.  progress:
-    called with each stage's name when it ends.
+    min_size, default size / 16), every tet measured, other warps tried near any outside
+    [10.7, 164.8] degrees (and near needles, 3r/R below NEEDLE_RATIO) and the band refined
+    where they do not mend an angle; if that does not keep the solid, the whole boundary size
+    shrinks by halves instead, as far as max_memory allows (not below size / 8 unless
+    min_size is given).  The report's notes say what was done.  False keeps size and only
+    warns.  A mesh that keeps less than half the solid's volume raises ParoctError, as one
+    with no tets does.  max_memory: bytes the run may use (default: the machine's available
+    memory); a size that would need more is refused before any work.  progress: called with
+    each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
