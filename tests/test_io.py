@@ -1,0 +1,107 @@
+"""Mesh output: paroct's own .vtu writer against meshio's reader and a plain decoder."""
+
+from __future__ import annotations
+
+import base64
+import xml.etree.ElementTree as ET
+import zlib
+
+import meshio
+import numpy as np
+import pytest
+
+from paroct.errors import ParoctError
+from paroct.io import VTU_BLOCK_BYTES, read_mesh, write_mesh, write_vtu
+
+
+def _random_mesh(seed: int, n_points: int, n_tets: int):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(scale=10.0 ** rng.integers(-300, 300, size=(n_points, 1)), size=(n_points, 3))
+    points[:4] = [[0.0, -0.0, 1e-310], [np.pi, -np.e, 1e300], [1, 2, 3], [-1, -2, -3]]
+    tets = rng.integers(0, n_points, size=(n_tets, 4))
+    return points, tets
+
+
+def _decode_vtu(path):
+    """A plain reader of compressed inline .vtu arrays: name -> (dtype name, raw bytes)."""
+    root = ET.parse(path).getroot()
+    assert root.get("compressor") == "vtkZLibDataCompressor" and root.get("header_type") == "UInt64"
+    arrays = {}
+    for node in root.iter("DataArray"):
+        text = node.text.strip()
+        n_blocks = int(np.frombuffer(base64.b64decode(text[:12])[:8], "<u8")[0])
+        header_chars = 4 * -(-8 * (3 + n_blocks) // 3)
+        header = np.frombuffer(base64.b64decode(text[:header_chars]), "<u8")
+        assert len(header) == 3 + n_blocks and header[1] == VTU_BLOCK_BYTES
+        blob = base64.b64decode(text[header_chars:])
+        assert len(blob) == header[3:].sum()
+        ends = np.cumsum(header[3:])
+        blocks = [zlib.decompress(blob[a:b]) for a, b in zip(np.r_[0, ends[:-1]], ends)]
+        assert all(len(b) == VTU_BLOCK_BYTES for b in blocks[:-1]) and len((blocks or [b""])[-1]) == header[2]
+        arrays[node.get("Name")] = (node.get("type"), b"".join(blocks))
+    return arrays
+
+
+def test_vtu_round_trips_exactly_through_meshio_and_a_plain_decoder(tmp_path):
+    points, tets = _random_mesh(7, 5000, 20000)  # connectivity spans several blocks
+    tag = (np.arange(len(tets)) % 5).astype(np.int32)
+    quality = np.linspace(0, 1, len(tets))
+    path = tmp_path / "m.vtu"
+    write_mesh(path, points, tets, {"tag": tag, "quality": quality})
+
+    back = meshio.read(path)
+    assert np.array_equal(back.points, points)  # bit for bit, -0.0 and subnormals included
+    assert np.array_equal(np.signbit(back.points), np.signbit(points))
+    assert [b.type for b in back.cells] == ["tetra"] and np.array_equal(back.cells[0].data, tets)
+    assert np.array_equal(back.cell_data["tag"][0], tag) and np.array_equal(back.cell_data["quality"][0], quality)
+
+    raw = _decode_vtu(path)
+    assert raw["Points"] == ("Float64", points.astype("<f8").tobytes())
+    assert raw["connectivity"] == ("Int32", tets.astype("<i4").tobytes())
+    assert raw["offsets"] == ("Int32", np.arange(4, 4 * len(tets) + 1, 4, dtype="<i4").tobytes())
+    assert raw["types"] == ("UInt8", bytes([10]) * len(tets))
+
+    # The same arrays give the same bytes, and read_mesh reads them.
+    again = tmp_path / "again.vtu"
+    write_vtu(again, points, tets.astype(np.int32), {"tag": tag, "quality": quality})
+    assert again.read_bytes() == path.read_bytes()
+    p, t = read_mesh(again)
+    assert np.array_equal(p, points) and np.array_equal(t, tets)
+
+
+def test_vtu_is_smaller_than_meshios_for_the_same_mesh(tmp_path):
+    # A lattice-like mesh: neighbouring tets share vertices, as in paroct's output.
+    points, _ = _random_mesh(3, 20000, 1)
+    base = np.arange(0, 20000 - 8, 2)
+    tets = np.stack([base, base + 1, base + 5, base + 8], axis=1)
+    write_mesh(tmp_path / "ours.vtu", points, tets)
+    meshio.write(tmp_path / "meshio.vtu", meshio.Mesh(points, [("tetra", tets)]), binary=True)
+    ours, theirs = meshio.read(tmp_path / "ours.vtu"), meshio.read(tmp_path / "meshio.vtu")
+    assert np.array_equal(ours.points, theirs.points) and np.array_equal(ours.cells[0].data, theirs.cells[0].data)
+    assert (tmp_path / "ours.vtu").stat().st_size < (tmp_path / "meshio.vtu").stat().st_size
+
+
+def test_vtu_of_no_tets_is_a_valid_empty_grid(tmp_path):
+    path = tmp_path / "empty.vtu"
+    write_vtu(path, np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64))
+    raw = _decode_vtu(path)
+    assert all(data == b"" for _, data in raw.values())
+
+
+@pytest.mark.parametrize(
+    "points, tets, cell_data, match",
+    [
+        (np.zeros((4, 2)), np.zeros((1, 4), int), None, r"points.shape = \(4, 2\)"),
+        (np.zeros((4, 3)), np.zeros((1, 3), int), None, r"tets.shape = \(1, 3\)"),
+        (np.zeros((4, 3)), np.zeros((2, 4), int), {"tag": np.zeros(3)}, r"cell_data\['tag'\].shape = \(3,\), len\(tets\) = 2"),
+        (np.zeros((4, 3)), np.zeros((1, 4), int), {"name": np.array(["a"])}, "cannot write <U1 arrays"),
+    ],
+)
+def test_vtu_refuses_arrays_it_cannot_write(tmp_path, points, tets, cell_data, match):
+    with pytest.raises(ValueError, match=match):
+        write_vtu(tmp_path / "bad.vtu", points, tets, cell_data)
+
+
+def test_write_mesh_into_a_missing_folder_is_a_clear_error(tmp_path):
+    with pytest.raises(ParoctError, match="does not exist"):
+        write_mesh(tmp_path / "no" / "m.vtu", np.zeros((4, 3)), np.array([[0, 1, 2, 3]]))
