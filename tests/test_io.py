@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from paroct.errors import ParoctError
-from paroct.io import VTU_BLOCK_BYTES, read_mesh, write_mesh, write_vtu
+from paroct.io import VTU_BLOCK_BYTES, _int_lines, read_mesh, write_mesh, write_vtu
 
 
 def _random_mesh(seed: int, n_points: int, n_tets: int):
@@ -105,3 +105,34 @@ def test_vtu_refuses_arrays_it_cannot_write(tmp_path, points, tets, cell_data, m
 def test_write_mesh_into_a_missing_folder_is_a_clear_error(tmp_path):
     with pytest.raises(ParoctError, match="does not exist"):
         write_mesh(tmp_path / "no" / "m.vtu", np.zeros((4, 3)), np.array([[0, 1, 2, 3]]))
+
+
+@pytest.mark.parametrize("suffix", [".inp", ".mesh"])
+def test_text_formats_round_trip_exactly_through_meshio(tmp_path, suffix):
+    points, tets = _random_mesh(11, 3000, 7000)
+    path = tmp_path / f"m{suffix}"
+    write_mesh(path, points, tets.astype(np.int32))
+    back = meshio.read(path)
+    assert np.array_equal(back.points, points) and np.array_equal(np.signbit(back.points), np.signbit(points))
+    assert [b.type for b in back.cells] == ["tetra"] and np.array_equal(back.cells[0].data, tets)
+    # meshio's own writer gives a file that reads back to the same arrays.
+    meshio.write(tmp_path / f"theirs{suffix}", meshio.Mesh(points, [("tetra", tets)]))
+    theirs = meshio.read(tmp_path / f"theirs{suffix}")
+    assert np.array_equal(theirs.points, back.points) and np.array_equal(theirs.cells[0].data, back.cells[0].data)
+
+
+def test_int_lines_match_python_formatting():
+    rng = np.random.default_rng(5)
+    rows = np.concatenate([rng.integers(0, 10 ** rng.integers(1, 18), size=(500, 4)),
+                           [[0, 8, 9, 98], [99, 998, 999, 10**18 - 1]]])
+    for first_id, reference, sep in [(1, -1, ", "), (-1, 1, " "), (7, 0, ","), (-1, -1, "\t")]:
+        text = _int_lines(rows, first_id, reference, np.frombuffer(sep.encode(), np.uint8)).tobytes().decode()
+        want = "".join(sep.join(([str(first_id + i)] if first_id >= 0 else []) + [str(v + 1) for v in row]
+                                + ([str(reference)] if reference >= 0 else [])) + "\n" for i, row in enumerate(rows))
+        assert text == want
+
+
+def test_writers_refuse_ids_outside_the_points(tmp_path):
+    for suffix in (".vtu", ".inp", ".mesh"):
+        with pytest.raises(ValueError, match=r"vertex ids 0 \.\. 4, len\(points\) = 4"):
+            write_mesh(tmp_path / f"bad{suffix}", np.zeros((4, 3)), np.array([[0, 1, 2, 4]]))
