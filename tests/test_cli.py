@@ -114,6 +114,17 @@ def test_verbose_reports_stages_as_they_end_and_their_times(tmp_path, capsys):
     assert (tmp_path / "a.vtu").read_bytes() == (tmp_path / "b.vtu").read_bytes()
 
 
+def test_verbose_load_time_includes_the_surface_the_cli_loaded(tmp_path, capsys):
+    from paroct.cli import format_mesh_summary
+
+    stl = _write_surface(tmp_path / "box.stl")
+    report = paroct.mesh(stl, divisions=8).report
+    report.stage_seconds.update(load=0.125, octree=1.0)
+    text = format_mesh_summary(report, "out.vtu", mesh_seconds=2.0, write_seconds=0.5, verbose=True, load_seconds=0.25)
+    assert "  load          0.375 s" in text.splitlines() and "  octree        1.000 s" in text.splitlines()
+    assert text.splitlines()[-1] == "time 2.500 s"
+
+
 def test_mesher_warnings_are_one_line_each_on_stderr(tmp_path, capsys, monkeypatch):
     real = paroct.mesher.mesh
 
