@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from paroct.errors import ParoctError
-from paroct.io import VTU_BLOCK_BYTES, _int_lines, read_mesh, write_mesh, write_vtu
+from paroct.io import VTU_BLOCK_BYTES, _int_lines, read_mesh, write_mesh
 
 
 def _random_mesh(seed: int, n_points: int, n_tets: int):
@@ -60,10 +60,12 @@ def test_vtu_round_trips_exactly_through_meshio_and_a_plain_decoder(tmp_path):
     assert raw["connectivity"] == ("Int32", tets.astype("<i4").tobytes())
     assert raw["offsets"] == ("Int32", np.arange(4, 4 * len(tets) + 1, 4, dtype="<i4").tobytes())
     assert raw["types"] == ("UInt8", bytes([10]) * len(tets))
+    components = {a.get("Name"): a.get("NumberOfComponents") for a in ET.parse(path).getroot().iter("DataArray")}
+    assert components == {"Points": "3", "connectivity": None, "offsets": None, "types": None, "tag": None, "quality": None}
 
     # The same arrays give the same bytes, and read_mesh reads them.
     again = tmp_path / "again.vtu"
-    write_vtu(again, points, tets.astype(np.int32), {"tag": tag, "quality": quality})
+    write_mesh(again, points, tets.astype(np.int32), {"tag": tag, "quality": quality})
     assert again.read_bytes() == path.read_bytes()
     p, t = read_mesh(again)
     assert np.array_equal(p, points) and np.array_equal(t, tets)
@@ -83,7 +85,7 @@ def test_vtu_is_smaller_than_meshios_for_the_same_mesh(tmp_path):
 
 def test_vtu_of_no_tets_is_a_valid_empty_grid(tmp_path):
     path = tmp_path / "empty.vtu"
-    write_vtu(path, np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64))
+    write_mesh(path, np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64))
     raw = _decode_vtu(path)
     assert all(data == b"" for _, data in raw.values())
 
@@ -99,7 +101,8 @@ def test_vtu_of_no_tets_is_a_valid_empty_grid(tmp_path):
 )
 def test_vtu_refuses_arrays_it_cannot_write(tmp_path, points, tets, cell_data, match):
     with pytest.raises(ValueError, match=match):
-        write_vtu(tmp_path / "bad.vtu", points, tets, cell_data)
+        write_mesh(tmp_path / "bad.vtu", points, tets, cell_data)
+    assert not (tmp_path / "bad.vtu").exists()
 
 
 def test_write_mesh_into_a_missing_folder_is_a_clear_error(tmp_path):
@@ -133,6 +136,6 @@ def test_int_lines_match_python_formatting():
 
 
 def test_writers_refuse_ids_outside_the_points(tmp_path):
-    for suffix in (".vtu", ".inp", ".mesh"):
+    for suffix in (".vtu", ".inp", ".mesh", ".msh"):
         with pytest.raises(ValueError, match=r"vertex ids 0 \.\. 4, len\(points\) = 4"):
             write_mesh(tmp_path / f"bad{suffix}", np.zeros((4, 3)), np.array([[0, 1, 2, 4]]))

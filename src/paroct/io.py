@@ -45,35 +45,51 @@ def output_format(path: str | os.PathLike) -> tuple[str, dict]:
 def write_mesh(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, cell_data: dict | None = None) -> None:
     """Write a tet mesh; the format follows the extension (binary where the format allows).
 
-    points: (N, 3) float64; tets: (M, 4) integer; cell_data: name -> (M,) array.
-    The same arrays always give the same bytes.
+    points: (N, 3) float64; tets: (M, 4) integer ids into points; cell_data: name -> (M,)
+    array (ValueError, with the shapes, for anything else).  The same arrays always give the
+    same bytes.
     """
     path = Path(path)
     fmt, options = output_format(path)
     if path.parent and not path.parent.exists():
         raise ParoctError(f"{path}: folder {path.parent} does not exist")
-    ours = {"vtu": write_vtu}
-    if not cell_data:
-        ours.update(abaqus=write_abaqus, medit=write_medit)
-    if fmt in ours:
-        try:
-            ours[fmt](path, points, tets, *([cell_data] if fmt == "vtu" else []))
-        except OSError as exc:
-            raise ParoctError(f"{path}: cannot write ({exc.strerror or exc})") from None
-        return
+    points, tets, cell_data = _checked(points, tets, cell_data)
+    try:
+        if fmt == "vtu":
+            _write_vtu(path, points, tets, cell_data)
+        elif fmt in _TEXT_WRITERS and not cell_data:  # with cell data, meshio's writer keeps what the format can
+            _TEXT_WRITERS[fmt](path, points, tets)
+        else:
+            _write_with_meshio(path, fmt, options, points, tets, cell_data)
+    except OSError as exc:
+        raise ParoctError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+def _write_with_meshio(path: Path, fmt: str, options: dict, points: np.ndarray, tets: np.ndarray, cell_data: dict) -> None:
     import meshio
 
-    mesh = meshio.Mesh(
-        np.asarray(points, dtype=np.float64),
-        [("tetra", np.asarray(tets, dtype=np.int64))],
-        cell_data={k: [np.asarray(v)] for k, v in (cell_data or {}).items()},
-    )
+    mesh = meshio.Mesh(points, [("tetra", tets.astype(np.int64))], cell_data={k: [v] for k, v in cell_data.items()})
     try:
         meshio.write(path, mesh, file_format=fmt, **options)
     except ImportError as exc:
         raise ParoctError(f"{path}: writing {fmt} needs an extra package ({exc.name or exc}); install it or pick .vtu") from None
-    except OSError as exc:
-        raise ParoctError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+def _checked(points, tets, cell_data: dict | None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """points as (N, 3) float64, tets (M, 4) integer ids into them and cell_data name -> (M, ...)
+    arrays, or ValueError stating the shapes."""
+    points = np.asarray(points, dtype=np.float64)
+    tets = np.asarray(tets)
+    if points.ndim != 2 or points.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or tets.dtype.kind not in "iu":
+        raise ValueError(f"points.shape = {points.shape}, tets.shape = {tets.shape} ({tets.dtype}); "
+                         "want (N, 3) and (M, 4) integer")
+    if tets.size and (tets.min() < 0 or tets.max() >= len(points)):
+        raise ValueError(f"tets hold vertex ids {tets.min()} .. {tets.max()}, len(points) = {len(points)}")
+    cell_data = {name: np.asarray(values) for name, values in (cell_data or {}).items()}
+    for name, values in cell_data.items():
+        if values.shape[:1] != (len(tets),):
+            raise ValueError(f"cell_data[{name!r}].shape = {values.shape}, len(tets) = {len(tets)}")
+    return points, tets, cell_data
 
 
 #: VTK cell type of a linear tetrahedron.
@@ -85,67 +101,42 @@ VTU_BLOCK_BYTES = 1 << 16
 VTU_ZLIB_LEVEL = 1
 
 
-def _checked(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """points as (N, 3) little-endian float64 and tets (M, 4) integer indices into them, or ValueError."""
-    points = np.asarray(points, dtype="<f8")
-    tets = np.asarray(tets)
-    if points.ndim != 2 or points.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or tets.dtype.kind not in "iu":
-        raise ValueError(f"points.shape = {points.shape}, tets.shape = {tets.shape} ({tets.dtype}); "
-                         "want (N, 3) and (M, 4) integer")
-    if tets.size and (tets.min() < 0 or tets.max() >= len(points)):
-        raise ValueError(f"tets hold vertex ids {tets.min()} .. {tets.max()}, len(points) = {len(points)}")
-    return points, tets
-
-
-def write_vtu(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, cell_data: dict | None = None) -> None:
-    """Write a VTK XML unstructured grid of tets: points (N, 3) float64, tets (M, 4) integer
-    (0-based), cell_data name -> (M,) array.
+def _write_vtu(path: Path, points: np.ndarray, tets: np.ndarray, cell_data: dict) -> None:
+    """VTK XML unstructured grid of tets (arrays as _checked returns them).
 
     Every array is inline base64 of zlib-compressed blocks with a UInt64 header
     (``compressor="vtkZLibDataCompressor"``, the layout VTK, ParaView and meshio read).
     Connectivity and offsets are Int32 while they fit (half the bytes of meshio's Int64);
-    the blocks are compressed on all cores (zlib releases the GIL). The same arrays give
-    the same bytes.
+    the blocks are compressed on all cores (zlib releases the GIL).
     """
-    points, tets = _checked(points, tets)
     n_cells = len(tets)
     index_type = "<i4" if max(len(points), 4 * n_cells) < 2**31 else "<i8"
-    arrays = [
-        ("Points", points, 3),
-        ("connectivity", tets.astype(index_type), 1),
-        ("offsets", np.arange(4, 4 * n_cells + 1, 4, dtype=index_type), 1),
-        ("types", np.full(n_cells, _VTK_TETRA, dtype="u1"), 1),
+    sections = [
+        ("Points", [("Points", points.astype("<f8", copy=False))]),
+        ("Cells", [("connectivity", tets.astype(index_type, copy=False).reshape(-1)),
+                   ("offsets", np.arange(4, 4 * n_cells + 1, 4, dtype=index_type)),
+                   ("types", np.full(n_cells, _VTK_TETRA, dtype="u1"))]),
+        ("CellData", [(name, values.astype(values.dtype.newbyteorder("<"), copy=False))
+                      for name, values in cell_data.items()]),
     ]
-    for name, values in (cell_data or {}).items():
-        values = np.asarray(values)
-        if values.shape[:1] != (n_cells,):
-            raise ValueError(f"cell_data[{name!r}].shape = {values.shape}, len(tets) = {n_cells}")
-        arrays.append((name, values.astype(values.dtype.newbyteorder("<")), 1 if values.ndim == 1 else values.shape[1]))
-    encoded = {}
-    with ThreadPoolExecutor(max(1, min(8, len(os.sched_getaffinity(0))))) as pool:
-        for name, values, _ in arrays:
-            encoded[name] = _vtu_zlib_base64(values, pool)
-    xml = ['<?xml version="1.0"?>',
-           '<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
-           'compressor="vtkZLibDataCompressor">',
-           '<UnstructuredGrid>', f'<Piece NumberOfPoints="{len(points)}" NumberOfCells="{n_cells}">']
-    sections = {"Points": "Points", "connectivity": "Cells", "offsets": "Cells", "types": "Cells"}
-    opened = None
-    with open(path, "wb") as out:
-        for name, values, components in arrays:
-            section = sections.get(name, "CellData")
-            if section != opened:
-                if opened:
-                    xml.append(f"</{opened}>")
-                xml.append(f"<{section}>")
-                opened = section
-            xml.append(f'<DataArray type="{_vtu_type(values.dtype)}" Name="{name}" '
-                       + (f'NumberOfComponents="{components}" ' if components > 1 else "") + 'format="binary">')
-            out.write(("\n".join(xml) + "\n").encode())
-            out.write(encoded[name])
-            xml = ["\n</DataArray>"]
-        xml += [f"</{opened}>", "</Piece>", "</UnstructuredGrid>", "</VTKFile>"]
-        out.write(("\n".join(xml) + "\n").encode())
+    # Every array's VTK type before the file is opened: an array it cannot hold leaves no file.
+    types = {(section, name): _vtu_type(values.dtype) for section, arrays in sections for name, values in arrays}
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    with open(path, "wb") as out, ThreadPoolExecutor(min(8, cores)) as pool:
+        out.write(b'<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" '
+                  b'header_type="UInt64" compressor="vtkZLibDataCompressor">\n<UnstructuredGrid>\n'
+                  + f'<Piece NumberOfPoints="{len(points)}" NumberOfCells="{n_cells}">\n'.encode())
+        for section, arrays in sections:
+            if not arrays:
+                continue
+            out.write(f"<{section}>\n".encode())
+            for name, values in arrays:
+                components = f'NumberOfComponents="{values.shape[1]}" ' if values.ndim == 2 else ""
+                out.write(f'<DataArray type="{types[section, name]}" Name="{name}" {components}format="binary">\n'.encode())
+                out.write(_vtu_zlib_base64(values, pool))
+                out.write(b"\n</DataArray>\n")
+            out.write(f"</{section}>\n".encode())
+        out.write(b"</Piece>\n</UnstructuredGrid>\n</VTKFile>\n")
 
 
 def _vtu_type(dtype: np.dtype) -> str:
@@ -170,10 +161,9 @@ def _vtu_zlib_base64(values: np.ndarray, pool: ThreadPoolExecutor) -> bytes:
 _TEXT_CHUNK_ROWS = 1 << 20
 
 
-def write_abaqus(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray) -> None:
+def _write_abaqus(path: Path, points: np.ndarray, tets: np.ndarray) -> None:
     """Abaqus / CalculiX input of linear tets (C3D4): *NODE and *ELEMENT blocks, ids from 1,
     coordinates with 17 significant digits (they read back bit for bit)."""
-    points, tets = _checked(points, tets)
     with open(path, "wb") as out:
         out.write(b"*HEADING\nparoct tet mesh\n*NODE\n")
         _write_points(out, points, "%d, %.17g, %.17g, %.17g\n", with_ids=True)
@@ -181,16 +171,19 @@ def write_abaqus(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray) 
         _write_int_rows(out, tets, b", ", with_ids=True)
 
 
-def write_medit(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray) -> None:
+def _write_medit(path: Path, points: np.ndarray, tets: np.ndarray) -> None:
     """Medit .mesh (MMG, FreeFem) of tets, ASCII, double precision: every vertex and tet with
     reference 1; coordinates with 17 significant digits (they read back bit for bit)."""
-    points, tets = _checked(points, tets)
     with open(path, "wb") as out:
         out.write(f"MeshVersionFormatted 2\nDimension 3\nVertices\n{len(points)}\n".encode())
         _write_points(out, points, "%.17g %.17g %.17g 1\n", with_ids=False)
         out.write(f"Tetrahedra\n{len(tets)}\n".encode())
         _write_int_rows(out, tets, b" ", with_ids=False, reference=1)
         out.write(b"End\n")
+
+
+#: meshio format name -> paroct's own writer (no cell data).
+_TEXT_WRITERS = {"abaqus": _write_abaqus, "medit": _write_medit}
 
 
 def _write_points(out, points: np.ndarray, line: str, with_ids: bool) -> None:
