@@ -266,7 +266,9 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, direct
 def _grow(coords, count, capacity):
     """coords with its first count rows kept and room for capacity rows."""
     grown = np.empty((capacity, 3), dtype=np.int64)
-    grown[:count] = coords[:count]
+    for i in range(count):  # not a slice assignment: its shape check compiles numba's string formatting (2-3 s)
+        for k in range(3):
+            grown[i, k] = coords[i, k]
     return grown
 
 

@@ -210,7 +210,8 @@ def _weld_kernel(vertices, bits, faces):
             j = merged[f, k]
             if new_id[j] < 0:
                 new_id[j] = n_vertices
-                out_vertices[n_vertices] = vertices[first[j]]
+                for i in range(3):  # not a row assignment: its shape check compiles numba's string formatting
+                    out_vertices[n_vertices, i] = vertices[first[j], i]
                 n_vertices += 1
             out_faces[n_faces, k] = new_id[j]
         n_faces += 1
