@@ -431,10 +431,12 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     if table is None:  # hashing reads no directory (not even one that did not fit)
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
         table, directory = np.full((1 << bits, 2), _EMPTY, dtype=np.int64), np.zeros(0, dtype=np.int32)
-    eager = np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape)
+    # A copy: broadcast_to's view is read-only, and numba compiles _number_vertices again (4-5 s)
+    # for a read-only array.
+    eager = np.array(np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape))
     return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory,
                                           SPLIT_POINT_OFFSETS,
-                                          np.ascontiguousarray(eager), FACE_CENTRE_RULES["eager"],
+                                          eager, FACE_CENTRE_RULES["eager"],
                                           FACE_CENTRE_RULES["minimal"]))
 
 
