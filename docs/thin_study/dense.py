@@ -833,15 +833,20 @@ class PlaneRecord:
         return plane_polish(start, sense, step_n, step_c, self.rec.X0, W, wr, wn, po, co, outs, iters)
 
 
-def run_plane_variant(raws, reach_fn, args, label):
-    """Stage 1: every tet on a coarse plane grid.  Stage 2: the args.top worst tets per category
-    (by min and by max) on a fine grid, then pattern search from the best planes."""
-    t0 = time.time()
+def distinct_records(raws, reach_fn):
+    """One Record per distinct key (tet shape, quad decisions, warp edges and reaches)."""
     recs = {}
     for raw in raws.values():
         r = Record(raw, reach_fn)
         recs.setdefault(r.key(), r)
-    recs = list(recs.values())
+    return list(recs.values())
+
+
+def run_plane_variant(raws, reach_fn, args, label):
+    """Stage 1: every tet on a coarse plane grid.  Stage 2: the args.top worst tets per category
+    (by min and by max) on a fine grid, then pattern search from the best planes."""
+    t0 = time.time()
+    recs = distinct_records(raws, reach_fn)
     coarse = fib_normals(args.normals)
     fine = fib_normals(args.fine_normals)
     stage1 = []
@@ -1062,11 +1067,7 @@ def fmt_case(rec, res, which):
 
 def run_variant(raws, reach_fn, args, label):
     t0 = time.time()
-    recs = {}
-    for raw in raws.values():
-        r = Record(raw, reach_fn)
-        recs.setdefault(r.key(), r)
-    recs = list(recs.values())
+    recs = distinct_records(raws, reach_fn)
     worst = {c: dict(min=(1e9, None, None), max=(-1e9, None, None), n=0, points=0) for c in CATS}
     per_pattern = {}
     for rec in recs:
