@@ -46,7 +46,8 @@ def _assert_valid(points, tets, surface):
     return faces, topo
 
 
-@pytest.mark.parametrize("name,divisions", [("angle_block", 40), ("xyz_cube", 40), ("bunny", 40), ("bunny", 80)])
+@pytest.mark.parametrize("name,divisions", [("angle_block", 40), ("angle_block", 35), ("xyz_cube", 40), ("bunny", 40),
+                                            ("bunny", 80)])
 def test_bundled_parts_mesh_validly_with_proven_angles(name, divisions):
     surface = load_surface(DATA / f"{name}.stl")
     result = mesh(surface, divisions=divisions)
@@ -54,6 +55,8 @@ def test_bundled_parts_mesh_validly_with_proven_angles(name, divisions):
     assert topo.genus == surface.genus and topo.components == surface.components
     rep = result.report
     assert rep.n_tets == result.mesh.tets.shape[0]
+    # The report's boundary comes from face matching among the shell tets only (repair.shell_tets).
+    assert (rep.boundary_components, rep.boundary_genus, rep.boundary_manifold) == (topo.components, topo.genus, True)
     if divisions == 80:
         assert abs(rep.volume_error) < 0.01
 
