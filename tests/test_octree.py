@@ -81,6 +81,37 @@ def test_complete_from_seeds_covers_root_and_keeps_seeds(seed):
         assert cl[j] >= lev
 
 
+def _naive_complete(keys, levels):
+    """Split from the root every octant that has a seed as a strict descendant."""
+    seeds = list(zip(keys.tolist(), levels.tolist()))
+    out, todo = [], [(0, 0)]
+    while todo:
+        key, lev = todo.pop()
+        if any(sl > lev and key <= sk <= _last(key, lev) for sk, sl in seeds):
+            step = 3 * (ML - lev - 1)
+            todo.extend((key | (c << step), lev + 1) for c in range(8))
+        else:
+            out.append((key, lev))
+    out.sort()
+    return np.array([k for k, _ in out], dtype=np.int64), np.array([lv for _, lv in out], dtype=np.int8)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_complete_from_seeds_matches_naive_splitting(seed):
+    # Many seeds, repeated ones and ancestors of others among them (levels in any order
+    # among equal keys): the descent's cursor must not skip any.
+    rng = np.random.default_rng(300 + seed)
+    keys, levels = _random_seeds(rng, 30, 4)
+    parents = np.array([octant.octant_parent_key(k, lv) for k, lv in zip(keys[:10], levels[:10])], dtype=np.int64)
+    keys = np.concatenate([keys, keys[:5], parents])
+    levels = np.concatenate([levels, levels[:5], np.maximum(levels[:10] - 1, 0)]).astype(np.int8)
+    order = np.argsort(keys, kind="stable")
+    keys, levels = keys[order], levels[order]
+    got = complete_from_seeds(keys, levels)
+    want = _naive_complete(keys, levels)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
 @pytest.mark.parametrize("seed", range(12))
 def test_balance_matches_naive_splitting(seed):
     rng = np.random.default_rng(100 + seed)
