@@ -238,96 +238,132 @@ def _slab_span(tri, a, b, a0, a1):
     return lo, hi
 
 
-@nb.njit(cache=True, inline="always")
-def _append_cell(out, out_faces, m, cell, cell_bits, f):
-    """Write the key of ``cell`` (cell coordinates (3,)) and face f at slot m, doubling the
-    arrays when full; returns them."""
-    if m == out.shape[0]:
-        out = np.concatenate((out, np.empty(m, dtype=np.int64)))
-        out_faces = np.concatenate((out_faces, np.empty(m, dtype=np.int64)))
-    out[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
-    out_faces[m] = f
-    return out, out_faces
+#: Most chunks a parallel pass over triangles is split into (each thread owns whole chunks).
+TRIANGLE_CHUNKS = 64
 
 
-@nb.njit(cache=True)
-def _surface_cell_keys(snapped, faces, snap_bits, cell_bits):
-    """Morton keys (octree coordinates at lattice resolution) of the cells of side
-    2**cell_bits lattice units that each triangle meets, with repeats, and the index into
-    faces of the triangle that listed each."""
+@nb.njit(cache=True, parallel=True)
+def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts):
+    """The cells of side 2**cell_bits lattice units that each triangle meets (Morton keys at
+    lattice resolution), written from offsets[f] on with face f, counts[f] = their number.
+
+    Two passes over the same loop (count, prefix sum, fill: each thread owns its triangles'
+    slots).  With empty offsets, counts[f] = the cells tested for triangle f, a cheap bound:
+    the exact tests run once, in the fill."""
+    bounding = offsets.shape[0] == 0
     unit = float(np.int64(1) << snap_bits)
     side = float(np.int64(1) << cell_bits)
     margin = 1e-7 * side
-    out = np.empty(4 * faces.shape[0] + 16, dtype=np.int64)
-    out_faces = np.empty(out.shape[0], dtype=np.int64)
-    m = 0
-    tri = np.empty((3, 3))
-    lo = np.empty(3)
-    cell = np.empty(3, dtype=np.int64)
-    c0 = np.empty(3, dtype=np.int64)
-    c1 = np.empty(3, dtype=np.int64)
-    for f in range(faces.shape[0]):
-        for k in range(3):
+    n = faces.shape[0]
+    n_chunks = min(n, TRIANGLE_CHUNKS)
+    for chunk in nb.prange(n_chunks):
+        tri = np.empty((3, 3))
+        lo = np.empty(3)
+        cell = np.empty(3, dtype=np.int64)
+        c0 = np.empty(3, dtype=np.int64)
+        c1 = np.empty(3, dtype=np.int64)
+        for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            start = 0 if bounding else offsets[f]
+            m = start
+            for k in range(3):
+                for i in range(3):
+                    tri[k, i] = snapped[faces[f, k], i] / unit
             for i in range(3):
-                tri[k, i] = snapped[faces[f, k], i] / unit
-        for i in range(3):
-            # Cells whose widened box meets the triangle's box (exact in floats: side is a power of two).
-            c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) - 2 * margin) / side))
-            c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) + 2 * margin) / side))
-        if c0[0] == c1[0] and c0[1] == c1[1] and c0[2] == c1[2]:
-            # The triangle lies inside one cell (the usual case for fine tessellations): the cell
-            # meets it, no test needed.
-            if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
-                out, out_faces = _append_cell(out, out_faces, m, c0, cell_bits, f)
-                m += 1
-            continue
-        # Walk the columns along the axis k where the triangle's plane is steepest: over a
-        # column the plane spans a short range of k (|n_k| is the largest normal component),
-        # so a slanted triangle costs O(area) cells, not O(box volume).
-        nx = (tri[1, 1] - tri[0, 1]) * (tri[2, 2] - tri[0, 2]) - (tri[1, 2] - tri[0, 2]) * (tri[2, 1] - tri[0, 1])
-        ny = (tri[1, 2] - tri[0, 2]) * (tri[2, 0] - tri[0, 0]) - (tri[1, 0] - tri[0, 0]) * (tri[2, 2] - tri[0, 2])
-        nz = (tri[1, 0] - tri[0, 0]) * (tri[2, 1] - tri[0, 1]) - (tri[1, 1] - tri[0, 1]) * (tri[2, 0] - tri[0, 0])
-        normal = (nx, ny, nz)
-        k = 0
-        if abs(ny) > abs(normal[k]):
-            k = 1
-        if abs(nz) > abs(normal[k]):
-            k = 2
-        a, b = (k + 1) % 3, (k + 2) % 3
-        steep = abs(normal[k]) > 0.0
-        offset = normal[0] * tri[0, 0] + normal[1] * tri[0, 1] + normal[2] * tri[0, 2]
-        for ca in range(max(c0[a], 0), c1[a] + 1):
-            # Only the columns the triangle's projection meets in this slab of a (widened as
-            # the cells are): a long slanted triangle covers a small part of its box.
-            cb0, cb1 = max(c0[b], 0), c1[b]
-            if c1[a] - c0[a] > 1 and c1[b] - c0[b] > 1:
-                b_lo, b_hi = _slab_span(tri, a, b, ca * side - 2 * margin, (ca + 1) * side + 2 * margin)
-                cb0 = max(cb0, np.int64(np.floor((b_lo - 2 * margin) / side)))
-                cb1 = min(cb1, np.int64(np.floor((b_hi + 2 * margin) / side)))
-            for cb in range(cb0, cb1 + 1):
-                k0, k1 = max(c0[k], 0), c1[k]
-                if steep:
-                    zmin, zmax = np.inf, -np.inf
-                    for da in range(2):
-                        for db in range(2):
-                            pa = (ca + da) * side + (2 * da - 1) * 2 * margin
-                            pb = (cb + db) * side + (2 * db - 1) * 2 * margin
-                            z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
-                            zmin = min(zmin, z)
-                            zmax = max(zmax, z)
-                    k0 = max(k0, np.int64(np.floor((zmin - 2 * margin) / side)))
-                    k1 = min(k1, np.int64(np.floor((zmax + 2 * margin) / side)))
-                for ck in range(k0, k1 + 1):
-                    cell[a] = ca
-                    cell[b] = cb
-                    cell[k] = ck
-                    for i in range(3):
-                        lo[i] = cell[i] * side - margin
-                    if not triangle_meets_cube(tri, lo, side + 2 * margin):
-                        continue
-                    out, out_faces = _append_cell(out, out_faces, m, cell, cell_bits, f)
+                # Cells whose widened box meets the triangle's box (exact in floats: side is a power of two).
+                c0[i] = np.int64(np.floor((min(tri[0, i], tri[1, i], tri[2, i]) - 2 * margin) / side))
+                c1[i] = np.int64(np.floor((max(tri[0, i], tri[1, i], tri[2, i]) + 2 * margin) / side))
+            if c0[0] == c1[0] and c0[1] == c1[1] and c0[2] == c1[2]:
+                # The triangle lies inside one cell (the usual case for fine tessellations): the cell
+                # meets it, no test needed.
+                if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
+                    if not bounding:
+                        keys[m] = morton_key(c0[0] << cell_bits, c0[1] << cell_bits, c0[2] << cell_bits)
+                        key_faces[m] = f
                     m += 1
-    return out[:m].copy(), out_faces[:m].copy()
+                counts[f] = m - start
+                continue
+            # Walk the columns along the axis k where the triangle's plane is steepest: over a
+            # column the plane spans a short range of k (|n_k| is the largest normal component),
+            # so a slanted triangle costs O(area) cells, not O(box volume).
+            nx = (tri[1, 1] - tri[0, 1]) * (tri[2, 2] - tri[0, 2]) - (tri[1, 2] - tri[0, 2]) * (tri[2, 1] - tri[0, 1])
+            ny = (tri[1, 2] - tri[0, 2]) * (tri[2, 0] - tri[0, 0]) - (tri[1, 0] - tri[0, 0]) * (tri[2, 2] - tri[0, 2])
+            nz = (tri[1, 0] - tri[0, 0]) * (tri[2, 1] - tri[0, 1]) - (tri[1, 1] - tri[0, 1]) * (tri[2, 0] - tri[0, 0])
+            normal = (nx, ny, nz)
+            k = 0
+            if abs(ny) > abs(normal[k]):
+                k = 1
+            if abs(nz) > abs(normal[k]):
+                k = 2
+            a, b = (k + 1) % 3, (k + 2) % 3
+            steep = abs(normal[k]) > 0.0
+            offset = normal[0] * tri[0, 0] + normal[1] * tri[0, 1] + normal[2] * tri[0, 2]
+            for ca in range(max(c0[a], 0), c1[a] + 1):
+                # Only the columns the triangle's projection meets in this slab of a (widened as
+                # the cells are): a long slanted triangle covers a small part of its box.
+                cb0, cb1 = max(c0[b], 0), c1[b]
+                if c1[a] - c0[a] > 1 and c1[b] - c0[b] > 1:
+                    b_lo, b_hi = _slab_span(tri, a, b, ca * side - 2 * margin, (ca + 1) * side + 2 * margin)
+                    cb0 = max(cb0, np.int64(np.floor((b_lo - 2 * margin) / side)))
+                    cb1 = min(cb1, np.int64(np.floor((b_hi + 2 * margin) / side)))
+                for cb in range(cb0, cb1 + 1):
+                    k0, k1 = max(c0[k], 0), c1[k]
+                    if steep:
+                        zmin, zmax = np.inf, -np.inf
+                        for da in range(2):
+                            for db in range(2):
+                                pa = (ca + da) * side + (2 * da - 1) * 2 * margin
+                                pb = (cb + db) * side + (2 * db - 1) * 2 * margin
+                                z = (offset - normal[a] * pa - normal[b] * pb) / normal[k]
+                                zmin = min(zmin, z)
+                                zmax = max(zmax, z)
+                        k0 = max(k0, np.int64(np.floor((zmin - 2 * margin) / side)))
+                        k1 = min(k1, np.int64(np.floor((zmax + 2 * margin) / side)))
+                    if bounding:
+                        m += max(k1 - k0 + 1, 0)
+                        continue
+                    for ck in range(k0, k1 + 1):
+                        cell[a] = ca
+                        cell[b] = cb
+                        cell[k] = ck
+                        for i in range(3):
+                            lo[i] = cell[i] * side - margin
+                        if not triangle_meets_cube(tri, lo, side + 2 * margin):
+                            continue
+                        keys[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
+                        key_faces[m] = f
+                        m += 1
+            counts[f] = m - start
+
+
+@nb.njit(cache=True)
+def written_slots(offsets, counts):
+    """Indices (sum counts,) of the slots a count-and-fill kernel wrote: counts[f] of them from
+    offsets[f] on, in order."""
+    out = np.empty(counts.sum(), dtype=np.int64)
+    m = 0
+    for f in range(counts.shape[0]):
+        for k in range(offsets[f], offsets[f] + counts[f]):
+            out[m] = k
+            m += 1
+    return out
+
+
+def _surface_cell_keys(snapped: np.ndarray, faces: np.ndarray, snap_bits: int, cell_bits: int) -> tuple[np.ndarray, np.ndarray]:
+    """Morton keys (octree coordinates at lattice resolution) of the cells of side
+    2**cell_bits lattice units that each triangle meets, with repeats, triangle by triangle,
+    and the index into faces of the triangle that listed each."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    bounds = np.empty(faces.shape[0], dtype=np.int64)
+    none = np.empty(0, dtype=np.int64)
+    _surface_cell_hits(snapped, faces, snap_bits, cell_bits, none, none, none, bounds)
+    offsets = np.zeros(faces.shape[0] + 1, dtype=np.int64)
+    np.cumsum(bounds, out=offsets[1:])
+    keys = np.empty(int(offsets[-1]), dtype=np.int64)
+    key_faces = np.empty(keys.shape[0], dtype=np.int64)
+    counts = np.empty(faces.shape[0], dtype=np.int64)
+    _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts)
+    written = written_slots(offsets, counts)
+    return keys[written], key_faces[written]
 
 
 def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> np.ndarray:
@@ -337,7 +373,7 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     relative margin of 1e-7 of the cell side, on the side of listing more cells: an octant not
     listed contains no surface point, so all its points have one inside/outside class.
     """
-    keys, _ = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
+    keys, _ = _surface_cell_keys(snapped, faces, snap_bits, frame.levels - level)
     return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
 
 
@@ -355,7 +391,7 @@ class FaceBuckets:
 
 def face_buckets(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> FaceBuckets:
     """surface_cells of ``level`` with the triangles that meet each (same margin)."""
-    keys, face_ids = _surface_cell_keys(snapped, np.ascontiguousarray(faces, dtype=np.int64), snap_bits, frame.levels - level)
+    keys, face_ids = _surface_cell_keys(snapped, faces, snap_bits, frame.levels - level)
     order = np.argsort(keys, kind="stable")  # faces were listed in increasing order
     keys, face_ids = keys[order], face_ids[order]
     first = np.ones(keys.shape[0], dtype=bool)

@@ -31,7 +31,7 @@ import numpy as np
 
 from .frame import FatFrame, row_basis
 from .octant import MAX_LEVEL, morton_key
-from .octree import FaceBuckets
+from .octree import TRIANGLE_CHUNKS, FaceBuckets, written_slots
 
 #: Snapped coordinates, and their images under the row bases, stay below 2**(COORD_BITS + 1)
 #: in magnitude; orientations then fit in int64 and positions in the 128-bit helper.
@@ -171,10 +171,6 @@ def _pack(r2, r3, j):
     return ((r2 + _KEY_OFFSET) << (2 * _KEY_BITS)) | ((r3 + _KEY_OFFSET) << _KEY_BITS) | (j + _KEY_OFFSET)
 
 
-#: Triangles are processed in this many chunks; each owns a scratch triangle.
-_ROW_HIT_CHUNKS = 64
-
-
 @nb.njit(cache=True, inline="always")
 def _load_triangle(coords, triangles, f, tri, unit_bits):
     """Copy triangle f (row coordinates) into tri (3, 3); returns the rows (r2a..r2b, r3a..r3b)
@@ -208,7 +204,7 @@ def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, 
     """
     bounding = offsets.shape[0] == 0
     n = triangles.shape[0]
-    n_chunks = min(n, _ROW_HIT_CHUNKS)
+    n_chunks = min(n, TRIANGLE_CHUNKS)
     for chunk in nb.prange(n_chunks):
         tri = np.empty((3, 3), dtype=np.int64)
         for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
@@ -242,18 +238,6 @@ def _in_row_coordinates(points, basis):
     for i in range(points.shape[0]):
         for r in range(3):
             out[i, r] = basis[r, 0] * points[i, 0] + basis[r, 1] * points[i, 1] + basis[r, 2] * points[i, 2]
-    return out
-
-
-@nb.njit(cache=True)
-def _written_slots(offsets, counts):
-    """Indices (sum counts,) of the slots _row_hits wrote, in order."""
-    out = np.empty(counts.sum(), dtype=np.int64)
-    m = 0
-    for f in range(counts.shape[0]):
-        for k in range(offsets[f], offsets[f] + counts[f]):
-            out[m] = k
-            m += 1
     return out
 
 
@@ -297,7 +281,7 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     hit_faces = np.empty(room, dtype=np.int32)
     counts = np.empty(triangles.shape[0], dtype=np.int64)
     _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, counts)
-    written = _written_slots(offsets, counts)
+    written = written_slots(offsets, counts)
     order = written[np.argsort(keys[written], kind="stable")]
     # Ties break on the position in faces[face_ids], the same order as on faces (ascending ids).
     _order_cells(keys, fracs, hit_faces, order)
