@@ -8,10 +8,12 @@
 Peers come from the optional extra: pip install -e ".[bench]".  Each run is a subprocess
 of this script (``--child``) with a wall-time limit and an address-space limit; it meshes
 once (``--repeat N``: N children, the fastest counts, the same rule for every mesher; the
-mesher call alone is timed, reading the surface included; paroct's cached numba
-kernels are loaded before) and saves the mesh; peak memory is the child's peak RSS above
-its level before the call.  The parent measures every mesh
-with the same function, paroct.check.mesh_metrics, against the input surface.  Failures
+mesher call alone is timed, reading the surface included; a paroct child first meshes
+small parts on every path, so its cached numba kernels are loaded, as in a long-lived
+process) and saves the mesh; peak memory is the child's peak RSS during the call above its
+RSS before it, the heap returned to the system and the peak reset first.  The parent
+measures every mesh with the same function, paroct.check.mesh_metrics, against the input
+surface.  Failures
 (exceptions, time or memory limit, no tets) are rows with their reason, never dropped.
 Peers are set up as a careful user would, for a target long edge ``size`` = diagonal / N:
 - paroct: ``paroct.mesh(size=size)`` (graded, thin features refined).
@@ -113,31 +115,71 @@ def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarr
     raise ValueError(f"unknown mesher {name}")
 
 
+def _warm_up_paroct() -> None:
+    """Mesh small parts on every path of paroct once: graded, uniform, pinch repair (angle_block
+    at diag/35) and a thin plate that takes the thin-feature path.  Run in a process of its
+    own before all children, it fills the numba cache (a fresh checkout has none, and a
+    compile inside a child would count against its time limit); run in each paroct child
+    before the timed call, it loads every kernel, as a long-lived process has them."""
+    import manifold3d
+
+    import paroct
+
+    paroct.mesh(ROOT / "data" / "bunny.stl", divisions=10)
+    paroct.mesh(ROOT / "data" / "angle_block.stl", divisions=35)
+    paroct.mesh(ROOT / "data" / "bunny.stl", size=0.025, max_size=0.025)
+    paroct.mesh(manifold3d.Manifold.cube([1, 1, 0.04]), size=0.2)
+
+
+def _status_bytes(field: str) -> int:
+    """A ``kB`` field of /proc/self/status (VmRSS, VmHWM) in bytes."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) * 1024
+    raise OSError(f"no {field} in /proc/self/status")
+
+
+def _memory_baseline() -> tuple[int, bool]:
+    """Return the heap to the system and restart the peak-RSS count, so that the peak after
+    the call minus this baseline is the memory the call itself needed (imports and warm-up
+    excluded, freed heap not reused for free).  Returns (baseline bytes, whether the peak
+    was reset); without /proc/self/clear_refs (Linux >= 4.0) the baseline is the high-water
+    mark so far, and small calls read 0."""
+    import ctypes
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+    try:
+        with open("/proc/self/clear_refs", "w") as refs:
+            refs.write("5")
+        return _status_bytes("VmRSS"), True
+    except OSError:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, False
+
+
 def _child(args) -> int:
     limit = int(args.memory_limit * 2**30)
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    if args.mesher == "paroct":  # load the cached numba kernels first, as a long-lived process would have
-        run_mesher("paroct", ROOT / "data" / "bunny.stl", 0.02)
-    baseline = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    if args.mesher == "paroct":
+        _warm_up_paroct()
+    baseline, reset = _memory_baseline()
     t = time.perf_counter()
     points, tets = run_mesher(args.mesher, Path(args.model), args.size)
     seconds = time.perf_counter() - t
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - baseline
+    peak = (_status_bytes("VmHWM") if reset else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) - baseline
     np.savez(args.out, points=np.asarray(points, dtype=np.float64), tets=np.asarray(tets, dtype=np.int64),
              seconds=seconds, peak=peak)
     return 0
 
 
 def _warm_paroct() -> None:
-    """Compile or load paroct's kernels once, outside every timed run: graded, uniform, with
-    pinch repair (angle_block at diag/35) and a thin plate that takes the thin-feature path (in
-    a fresh checkout the numba cache is empty, and a kernel first used inside a timed run
-    would count its compile time)."""
-    code = (f"import manifold3d, paroct; paroct.mesh(r'{ROOT / 'data' / 'bunny.stl'}', divisions=10); "
-            f"paroct.mesh(r'{ROOT / 'data' / 'angle_block.stl'}', divisions=35); "
-            f"paroct.mesh(r'{ROOT / 'data' / 'bunny.stl'}', size=0.025, max_size=0.025); "
-            "paroct.mesh(manifold3d.Manifold.cube([1, 1, 0.04]), size=0.2)")
-    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+    """Fill paroct's numba cache in a process of its own, before every timed child."""
+    subprocess.run([sys.executable, __file__, "--warm-up"], check=True, capture_output=True)
 
 
 def measure(mesher: str, model: Path, size: float, time_limit: float, memory_limit: float, repeat: int = 1) -> dict:
@@ -253,6 +295,7 @@ def main(argv=None) -> int:
     ap.add_argument("--markdown", help="write per-level summary tables (markdown) to this file")
     ap.add_argument("--from-json", nargs="+", help="only tabulate rows saved by earlier --json runs")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--warm-up", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--mesher", help=argparse.SUPPRESS)
     ap.add_argument("--model", help=argparse.SUPPRESS)
     ap.add_argument("--size", type=float, help=argparse.SUPPRESS)
@@ -260,6 +303,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.child:
         return _child(args)
+    if args.warm_up:
+        _warm_up_paroct()
+        return 0
     if args.from_json:
         # A later file's row replaces an earlier one for the same mesher, model and size.
         merged = {(r["mesher"], r["model"], r["divisions"]): r for f in args.from_json for r in json.loads(Path(f).read_text())}
