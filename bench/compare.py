@@ -278,8 +278,46 @@ def markdown(rows: list[dict]) -> str:
         failed = [r for r in level if r["status"] != "ok"]
         if failed:
             out += ["", "Failures: " + "; ".join(f"{r['mesher']} on {r['model']}: {r['status']}" for r in failed)]
-        out.append("")
+        out += ["", *per_model_ratios(level), ""]
     return "\n".join(out)
+
+
+def per_model_ratios(level: list[dict], reference: str = "paroct") -> list[str]:
+    """Markdown table over the models of one size: the reference mesher's tets, time and
+    peak bytes per tet, and against each other mesher that meshed the model, tets/s ratio
+    (reference over peer: > 1 means the reference is faster) and bytes-per-tet ratio (peer
+    over reference: > 1 means the reference needs less memory per tet); medians last."""
+    ok = {(r["mesher"], r["model"]): r for r in level if r["status"] == "ok"}
+    peers = [m for m in dict.fromkeys(r["mesher"] for r in level) if m != reference]
+    models = [m for m in dict.fromkeys(r["model"] for r in level) if (reference, m) in ok]
+    if not peers or not models:
+        return []
+    head = f"| model | {reference} tets | {reference} s | {reference} B/tet |"
+    head += "".join(f" tets/s over {p} | {p} B/tet over {reference} |" for p in peers)
+    out = [head, "|---" * (4 + 2 * len(peers)) + "|"]
+    speed = {p: [] for p in peers}
+    memory = {p: [] for p in peers}
+    for model in models:
+        ref = ok[(reference, model)]
+        line = f"| {model} | {ref['tets']:,} | {ref['seconds']:.3f} | {ref['bytes_per_tet']:.0f} |"
+        for p in peers:
+            peer = ok.get((p, model))
+            if peer is None:
+                line += " failed | |"
+                continue
+            speed[p].append(ref["tets_per_s"] / peer["tets_per_s"])
+            line += f" {speed[p][-1]:.1f} |"
+            if ref["bytes_per_tet"] > 0 and peer["bytes_per_tet"] > 0:  # 0: not measured (older results)
+                memory[p].append(peer["bytes_per_tet"] / ref["bytes_per_tet"])
+                line += f" {memory[p][-1]:.1f} |"
+            else:
+                line += " n/a |"
+        out.append(line)
+    line = "| median | | | |"
+    for p in peers:
+        line += f" **{statistics.median(speed[p]):.1f}** |" if speed[p] else " |"
+        line += f" **{statistics.median(memory[p]):.1f}** |" if memory[p] else " |"
+    return out + [line]
 
 
 def main(argv=None) -> int:
