@@ -117,7 +117,9 @@ def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarr
 
 def _warm_up_paroct() -> None:
     """Mesh small parts on every path of paroct once: graded, uniform, pinch repair (angle_block
-    at diag/35) and a thin plate that takes the thin-feature path.  Run in a process of its
+    at diag/35), a thin plate that takes the thin-feature path, and a slanted rod, whose box
+    is so empty that its vertices are numbered through a brick directory (without it,
+    fea_part's first call loaded those kernels inside the timed call).  Run in a process of its
     own before all children, it fills the numba cache (a fresh checkout has none, and a
     compile inside a child would count against its time limit); run in each paroct child
     before the timed call, it loads every kernel, as a long-lived process has them."""
@@ -129,6 +131,8 @@ def _warm_up_paroct() -> None:
     paroct.mesh(ROOT / "data" / "angle_block.stl", divisions=35)
     paroct.mesh(ROOT / "data" / "bunny.stl", size=0.025, max_size=0.025)
     paroct.mesh(manifold3d.Manifold.cube([1, 1, 0.04]), size=0.2)
+    paroct.mesh(manifold3d.Manifold.cylinder(1.0, 0.05, 0.05, 16).rotate([0, 54.7356, 45]), size=0.02,
+                thin_features=False)
 
 
 def _status_bytes(field: str) -> int:
@@ -371,10 +375,10 @@ def main(argv=None) -> int:
                 row["divisions"] = div
                 rows.append(row)
                 print(format_row(row), flush=True)
+                if args.json:  # after every row: a run stopped midway keeps what it measured
+                    Path(args.json).write_text(json.dumps(rows, indent=1))
         print()
         print("\n".join(summary([r for r in rows if r["divisions"] == div])))
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
     if args.markdown:
         Path(args.markdown).write_text(markdown(rows))
     return 0
