@@ -135,38 +135,31 @@ def _warm_up_paroct() -> None:
                 thin_features=False)
 
 
-def _status_bytes(field: str) -> int:
-    """A ``kB`` field of /proc/self/status (VmRSS, VmHWM) in bytes."""
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) * 1024
-    raise OSError(f"no {field} in /proc/self/status")
-
-
 def _memory_baseline() -> tuple[int, bool]:
     """Return the heap to the system and restart the peak-RSS count, so that the peak after
     the call minus this baseline is the memory the call itself needed (imports and warm-up
     excluded, freed heap not reused for free).  Returns (baseline bytes, whether the peak
-    was reset); without /proc/self/clear_refs (Linux >= 4.0) the baseline is the high-water
-    mark so far, and small calls read 0."""
+    was restarted); where it cannot be (not Linux), the baseline is the high-water mark so
+    far, and small calls read 0."""
     import ctypes
     import gc
+
+    from paroct.memory import start_peak_count
 
     gc.collect()
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):
         pass
-    try:
-        with open("/proc/self/clear_refs", "w") as refs:
-            refs.write("5")
-        return _status_bytes("VmRSS"), True
-    except OSError:
+    now = start_peak_count()
+    if now is None:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, False
+    return now, True
 
 
 def _child(args) -> int:
+    from paroct.memory import peak_resident
+
     limit = int(args.memory_limit * 2**30)
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     if args.mesher == "paroct":
@@ -175,7 +168,7 @@ def _child(args) -> int:
     t = time.perf_counter()
     points, tets = run_mesher(args.mesher, Path(args.model), args.size)
     seconds = time.perf_counter() - t
-    peak = (_status_bytes("VmHWM") if reset else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) - baseline
+    peak = (peak_resident() if reset else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) - baseline
     np.savez(args.out, points=np.asarray(points, dtype=np.float64), tets=np.asarray(tets, dtype=np.int64),
              seconds=seconds, peak=peak)
     return 0

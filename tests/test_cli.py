@@ -106,6 +106,11 @@ def test_verbose_reports_stages_as_they_end_and_their_times(tmp_path, capsys):
     done = re.findall(r"^paroct: (\w+) done$", err, re.M)
     timed = re.findall(r"^  (\w+) +\d+\.\d+ s$", out, re.M)
     assert done and set(done) <= set(timed) and "write" in timed
+    from paroct.memory import start_peak_count
+
+    if start_peak_count() is not None:  # Linux: the peak of the run is measured
+        assert re.search(r"^peak memory \d+\.\d MiB above the start, \d+ bytes per tet \(kernels loaded included\)$",
+                         out, re.M)
     rc, out, err = _run(capsys, "mesh", stl, "-o", tmp_path / "b.vtu", "--divisions", 8)
     assert rc == 0
     assert "done" not in err and not re.search(r"^  \w+ +\d", out, re.M)
@@ -123,6 +128,18 @@ def test_verbose_load_time_includes_the_surface_the_cli_loaded(tmp_path, capsys)
     text = format_mesh_summary(report, "out.vtu", mesh_seconds=2.0, write_seconds=0.5, verbose=True, load_seconds=0.25)
     assert "  load          0.375 s" in text.splitlines() and "  octree        1.000 s" in text.splitlines()
     assert text.splitlines()[-1] == "time 2.500 s"
+    assert "peak memory" not in text  # not measured
+
+
+def test_verbose_summary_reports_peak_memory_per_tet(tmp_path):
+    from paroct.cli import format_mesh_summary
+
+    report = paroct.mesh(_write_surface(tmp_path / "box.stl"), divisions=8).report
+    text = format_mesh_summary(report, "out.vtu", mesh_seconds=1.0, write_seconds=0.5, verbose=True,
+                               peak_bytes=3 * 2**20)
+    line = f"peak memory 3.0 MiB above the start, {3 * 2**20 / report.n_tets:.0f} bytes per tet (kernels loaded included)"
+    assert line in text.splitlines()
+    assert "peak memory" not in format_mesh_summary(report, "out.vtu", 1.0, 0.5, verbose=False, peak_bytes=3 * 2**20)
 
 
 def test_mesher_warnings_are_one_line_each_on_stderr(tmp_path, capsys, monkeypatch):

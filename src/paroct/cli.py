@@ -75,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
     talk = m.add_mutually_exclusive_group()
-    talk.add_argument("-v", "--verbose", action="store_true", help="report each stage as it ends, and stage times")
+    talk.add_argument("-v", "--verbose", action="store_true", help="report each stage as it ends, stage times and peak memory")
     talk.add_argument("-q", "--quiet", action="store_true", help="no summary (warnings and errors still go to stderr)")
     m.set_defaults(run=_run_mesh)
 
@@ -117,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run_mesh(args: argparse.Namespace) -> int:
     from .io import output_format, write_mesh
+    from .memory import peak_resident, start_peak_count
     from .mesher import mesh, resolve_size
     from .sizing import Box, Sphere
     from .surface import load_surface
@@ -138,6 +139,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
 
     if not args.quiet and not _kernels_cached():
         _err("compiling the numba kernels on this first run (about a minute on 2 cores; cached afterwards)")
+    memory_start = start_peak_count() if args.verbose else None
     t0 = time.perf_counter()
     regions = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
     regions += [Sphere(center=tuple(b[:3]), radius=b[3], size=b[4]) for b in args.refine_sphere]
@@ -150,21 +152,25 @@ def _run_mesh(args: argparse.Namespace) -> int:
     t1 = time.perf_counter()
     write_mesh(out, result.mesh.points, result.mesh.tets)
     t2 = time.perf_counter()
+    peak = peak_resident() if memory_start is not None else None
     report = result.report
     for warning in report.warnings:
         _err(f"warning: {_one_line(warning)}")
     if not args.quiet:
         print(format_mesh_summary(report, out, mesh_seconds=t1 - t0, write_seconds=t2 - t1, verbose=args.verbose,
-                                  load_seconds=t_loaded - t0))
+                                  load_seconds=t_loaded - t0,
+                                  peak_bytes=None if peak is None else max(peak - memory_start, 0)))
     return EXIT_OK
 
 
 def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seconds: float, verbose: bool = False,
-                        load_seconds: float | None = None) -> str:
+                        load_seconds: float | None = None, peak_bytes: int | None = None) -> str:
     """Printable summary of a mesher.MeshReport: counts, quality, volume, topology, times (seconds).
 
     load_seconds: time spent loading the surface before mesh() was called, added to the
-    report's "load" stage (which only times what mesh() itself did)."""
+    report's "load" stage (which only times what mesh() itself did).  peak_bytes: peak
+    resident memory of loading, meshing and writing above the process's before (verbose
+    only; None: not measured)."""
     err = report.volume_error
     err_text = "n/a" if math.isnan(err) else f"{100 * err:+.2f}%"
     lines = [
@@ -187,6 +193,10 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
         stages["load"] = stages.get("load", 0.0) + (load_seconds or 0.0)
         lines += [f"  {stage:<10} {seconds:8.3f} s" for stage, seconds in stages.items()]
         lines.append(f"  {'write':<10} {write_seconds:8.3f} s")
+        if peak_bytes is not None:
+            # The kernels a process loads on first use count too: about 60 MiB, which small meshes show.
+            lines.append(f"peak memory {peak_bytes / 2**20:.1f} MiB above the start, "
+                         f"{peak_bytes / max(report.n_tets, 1):.0f} bytes per tet (kernels loaded included)")
     lines.append(f"time {mesh_seconds + write_seconds:.3f} s")
     return "\n".join(lines)
 
