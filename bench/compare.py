@@ -13,8 +13,8 @@ small parts on every path, so its cached numba kernels are loaded, as in a long-
 process) and saves the mesh; peak memory is the child's peak RSS during the call above its
 RSS before it, the heap returned to the system and the peak reset first.  The parent
 measures every mesh with the same function, paroct.check.mesh_metrics, against the input
-surface.  Failures
-(exceptions, time or memory limit, no tets) are rows with their reason, never dropped.
+surface.  Failures (exceptions, time or memory limit, no tets) are rows with their reason,
+never dropped.
 Peers are set up as a careful user would, for a target long edge ``size`` = diagonal / N:
 - paroct: ``paroct.mesh(size=size)`` (graded, thin features refined).
 - TetGen: quality switch (radius-edge 1.2, min dihedral 10) and a fixed volume bound (``-a``)
