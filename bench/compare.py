@@ -115,14 +115,15 @@ def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarr
     raise ValueError(f"unknown mesher {name}")
 
 
-def _warm_up_paroct() -> None:
+def warm_up_paroct() -> None:
     """Mesh small parts on every path of paroct once: graded, uniform, pinch repair (angle_block
     at diag/35), a thin plate that takes the thin-feature path, and a slanted rod, whose box
     is so empty that its vertices are numbered through a brick directory (without it,
     fea_part's first call loaded those kernels inside the timed call).  Run in a process of its
     own before all children, it fills the numba cache (a fresh checkout has none, and a
     compile inside a child would count against its time limit); run in each paroct child
-    before the timed call, it loads every kernel, as a long-lived process has them."""
+    before the timed call, it loads every kernel, as a long-lived process has them.
+    tests/test_kernels.py meshes the same parts to check that no kernel compiles twice."""
     import manifold3d
 
     import paroct
@@ -163,7 +164,7 @@ def _child(args) -> int:
     limit = int(args.memory_limit * 2**30)
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     if args.mesher == "paroct":
-        _warm_up_paroct()
+        warm_up_paroct()
     baseline, reset = _memory_baseline()
     t = time.perf_counter()
     points, tets = run_mesher(args.mesher, Path(args.model), args.size)
@@ -339,7 +340,7 @@ def main(argv=None) -> int:
     if args.child:
         return _child(args)
     if args.warm_up:
-        _warm_up_paroct()
+        warm_up_paroct()
         return 0
     if args.from_json:
         # A later file's row replaces an earlier one for the same mesher, model and size.
