@@ -158,6 +158,35 @@ def test_thin_walls_refine_the_boundary_until_two_layers_span_them():
     assert rep.n_tets < 0.5 * everywhere.report.n_tets
 
 
+def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):
+    """_outside_bound measures only tets with a vertex that is not core.  The tets it skips
+    (stuffing's copies of lattice tets) are never outside the bound nor needles, and on the
+    fin's passes, whose band changes level, it finds the bad tets and needles that measuring
+    every tet finds."""
+    from paroct import mesher
+
+    calls = []
+    restricted = mesher._outside_bound
+
+    def both(points, tets, core):
+        got = restricted(points, tets, core)
+        q = tet_quality(points, tets)
+        outside = (q.min_dihedral < mesher.DIHEDRAL_BOUND[0]) | (q.max_dihedral > mesher.DIHEDRAL_BOUND[1])
+        needle = ~outside & (q.radius_ratio < mesher.NEEDLE_RATIO)
+        copied = mesher._all_core(tets, core)
+        assert not (outside | needle)[copied].any()
+        assert q.min_dihedral[copied].min(initial=90) > 30 - 1e-9 and q.radius_ratio[copied].min(initial=1) >= 0.4
+        np.testing.assert_array_equal(got[0], outside)
+        np.testing.assert_array_equal(got[1], needle)
+        calls.append((int(copied.sum()), int((outside | needle).sum())))
+        return got
+
+    monkeypatch.setattr(mesher, "_outside_bound", both)
+    mesh(_FIN_PART, size=0.1)
+    assert calls[0][0] > 0  # the first call, over all tets, skipped some (later ones: restuffed tets)
+    assert sum(n_bad for _, n_bad in calls) > 0  # and it had bad tets or needles to find
+
+
 def test_min_size_floor_is_reported_in_one_line():
     result = mesh(_FIN_PART, size=0.1, min_size=0.05)
     rep = result.report
