@@ -960,7 +960,9 @@ def _measure(points, tets, core, faces, report: MeshReport) -> None:
         report.interior_min_dihedral = summary.interior_min_dihedral
         report.interior_max_dihedral = summary.interior_max_dihedral
     report.mesh_volume = summary.volume
-    topo = surface_topology(faces, points.shape[0])
+    # remove_pinches left no non-manifold boundary vertex (it checks them all, and raises if
+    # its repair leaves one), so they are not counted again.
+    topo = surface_topology(faces, points.shape[0], bad_vertices=0)
     report.boundary_genus = topo.genus
     report.boundary_components = topo.components
     report.boundary_manifold = topo.manifold

@@ -267,15 +267,18 @@ class SurfaceTopology:
         return (2 * self.components - self.euler) // 2
 
 
-def surface_topology(faces: np.ndarray, n_vertices: int) -> SurfaceTopology:
-    """Edges, manifoldness, components and Euler characteristic of triangles (F, 3)."""
+def surface_topology(faces: np.ndarray, n_vertices: int, *, bad_vertices: int | None = None) -> SurfaceTopology:
+    """Edges, manifoldness, components and Euler characteristic of triangles (F, 3).
+    bad_vertices: how many nonmanifold_vertices the faces have, when the caller has counted
+    them already (mesher: remove_pinches checks every boundary vertex), else counted here."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     if faces.shape[0] == 0:
         return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
     count, forward, n_used = edge_multiplicities(faces, n_vertices)
     n_edges = count.shape[0]
     bad_edges = int(np.sum((count != 2) | (forward != 1)))
-    bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
+    if bad_vertices is None:
+        bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
     components = _components(faces, n_vertices)
     euler = n_used - n_edges + faces.shape[0]
     return SurfaceTopology(faces.shape[0], n_used, n_edges, bad_edges, bad_vertices, components, euler)
