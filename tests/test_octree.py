@@ -1,11 +1,13 @@
 """Octree algorithms against slow, obvious twins on random trees (fixed seeds)."""
 
+import itertools
+
 import numpy as np
 import pytest
 
 from paroct import octant
 from paroct.octree import (
-    _unique_octants,
+    _insulation_parents,
     balance,
     complete_from_seeds,
     octants_holding,
@@ -113,13 +115,23 @@ def test_complete_from_seeds_matches_naive_splitting(seed):
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 
-@pytest.mark.parametrize("level,n", [(1, 3), (2, 400), (4, 50), (4, 5000), (6, 100)])
-def test_unique_octants_matches_python_set(level, n):
-    # Both paths: the bitmap (few octants in the level against the keys) and the sort.
+@pytest.mark.parametrize("level,n", [(1, 3), (2, 40), (4, 50), (4, 3000), (6, 100), (12, 20000)])
+def test_insulation_parents_lists_every_neighbour_in_the_root(level, n):
+    # Clustered parents repeat most neighbours; the table of listed keys must drop only repeats.
     rng = np.random.default_rng(level * 1000 + n)
-    side = 1 << (ML - level)
-    keys = octant.morton_keys(rng.integers(0, 1 << level, size=(n, 3)) * side)
-    assert _unique_octants(keys, level).tolist() == sorted(set(keys.tolist()))
+    side = 1 << (ML - level + 1)
+    span = min(1 << (level - 1), 24)
+    coords = rng.integers(0, span, size=(n, 3))
+    parents = np.unique(octant.morton_keys(coords * side))
+    want = set()
+    for x, y, z in coords.tolist():
+        for d in itertools.product((-1, 0, 1), repeat=3):
+            q = (x + d[0], y + d[1], z + d[2])
+            if d != (0, 0, 0) and all(0 <= c < 1 << (level - 1) for c in q):
+                want.add(octant.morton_key(q[0] * side, q[1] * side, q[2] * side))
+    got = _insulation_parents(parents, level)
+    assert set(got.tolist()) == want
+    assert len(got) <= 26 * len(parents) and (n < 1000 or len(got) < 3 * len(want))
 
 
 @pytest.mark.parametrize("seed", range(12))

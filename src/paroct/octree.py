@@ -505,10 +505,15 @@ def _insulation_parents(parents, level):
 
     Splitting a parent makes all eight children leaves of ``level``, so each of them needs its
     neighbours at ``level - 1`` or finer: those are the parent's same-size neighbours.
+    Parents near each other in key order share most of their neighbours: a neighbour already
+    in a small direct-mapped table of those listed is not listed again, so the list holds
+    each about once or twice instead of about ten times, and the dedupe that follows sorts
+    that much less (the list may still repeat keys, in any order).
     """
     side = octant_len(level - 1)
     root = np.int64(1) << MAX_LEVEL
     out = np.empty(26 * parents.shape[0] + 1, dtype=np.int64)
+    listed = np.full(_LISTED_SLOTS, -1, dtype=np.int64)
     m = 0
     for i in range(parents.shape[0]):
         x, y, z = morton_coords(parents[i])
@@ -522,43 +527,21 @@ def _insulation_parents(parents, level):
                     nz = z + dz * side
                     if nx < 0 or ny < 0 or nz < 0 or nx >= root or ny >= root or nz >= root:
                         continue
-                    out[m] = morton_key(nx, ny, nz)
+                    key = morton_key(nx, ny, nz)
+                    slot = (key * _FIBONACCI_MULTIPLIER) >> np.int64(64 - _LISTED_BITS) & (_LISTED_SLOTS - 1)
+                    if listed[slot] == key:
+                        continue
+                    listed[slot] = key
+                    out[m] = key
                     m += 1
     return out[:m]
 
 
-@nb.njit(cache=True)
-def _unique_by_bitmap(keys, level):
-    """sorted_unique of octant keys of one level, through one byte per octant of that level
-    in the root (the Morton index is the key shifted down, so a scan lists them sorted)."""
-    shift = 3 * (MAX_LEVEL - level)
-    seen = np.zeros(np.int64(1) << (3 * level), dtype=np.bool_)
-    n = 0
-    for i in range(keys.shape[0]):
-        j = keys[i] >> shift
-        if not seen[j]:
-            seen[j] = True
-            n += 1
-    out = np.empty(n, dtype=np.int64)
-    m = 0
-    for j in range(seen.shape[0]):
-        if seen[j]:
-            out[m] = np.int64(j) << shift
-            m += 1
-    return out
-
-
-#: _unique_octants scans a bitmap of the level's octants when it has at most this many per key.
-_BITMAP_PER_KEY = 4
-
-
-def _unique_octants(keys: np.ndarray, level: int) -> np.ndarray:
-    """sorted_unique of octant keys of one level: a bitmap over the level's octants where that
-    is small against the keys (balance's insulation layers repeat each octant about ten
-    times: 4-5x faster than sorting them), else a sort."""
-    if (1 << (3 * level)) <= _BITMAP_PER_KEY * keys.shape[0]:
-        return _unique_by_bitmap(keys, level)
-    return sorted_unique(keys)
+#: _insulation_parents' table of listed keys: 2^15 slots (256 KiB, in the L2 cache).
+_LISTED_BITS = 15
+_LISTED_SLOTS = 1 << _LISTED_BITS
+#: Knuth's multiplicative hash, 2^64 / golden ratio as a signed int64 (wraps like uint64).
+_FIBONACCI_MULTIPLIER = np.int64(-7046029254386353131)
 
 
 def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -574,8 +557,7 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
     seeds_k, seeds_l = [keys], [levels]
     current_k, current_l = keys, levels
     for level in range(int(levels.max(initial=0)), 1, -1):
-        parents = _unique_octants(_insulation_parents(sorted_unique(_parent_keys(current_k, current_l, level)), level),
-                                  level - 1)
+        parents = sorted_unique(_insulation_parents(sorted_unique(_parent_keys(current_k, current_l, level)), level))
         seeds_k.append(parents)
         seeds_l.append(np.full(parents.shape[0], level - 1, dtype=np.int8))
         current_k = np.concatenate([current_k, parents])
