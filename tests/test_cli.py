@@ -194,6 +194,11 @@ def _nan_box(tmp_path):
     return _write_surface(tmp_path / "nan.stl", v, f)
 
 
+def _scaled_box(tmp_path, scale):
+    v, f = _surface_arrays()
+    return _write_surface(tmp_path / "scaled.obj", v * scale, f)
+
+
 def _inside_out_box(tmp_path):
     v, f = _surface_arrays()
     return _write_surface(tmp_path / "inside_out.stl", v, f[:, ::-1])
@@ -212,6 +217,8 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", _unknown_extension(t)], "unknown surface format '.xyz'"),
         (lambda t, s: ["mesh", _open_box(t)], r"open surface, \d+ boundary edges"),
         (lambda t, s: ["mesh", _nan_box(t)], "NaN"),
+        (lambda t, s: ["mesh", _scaled_box(t, 1e110)], r"coordinate reaches 1.\d+e\+110; .* up to 1e\+100 .* scale the part"),
+        (lambda t, s: ["mesh", _scaled_box(t, 1e-110)], r"spans only 1.39e-110 \(longest side of its bounding box\); .* 1e-100 or more .* scale the part"),
         (lambda t, s: ["mesh", _inside_out_box(t)], r"negative volume \(volume = -0.48, inside out\?\)"),
         (lambda t, s: ["mesh", _written(t / "cut.stl", b"solid x\nfacet normal 0 0 1\n")], "cannot read .* as STL"),
         (lambda t, s: ["mesh", _written(t / "none.stl", bytes(84))], "empty surface"),

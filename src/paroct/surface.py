@@ -306,6 +306,25 @@ def _status_error(name: str, label: str, boundary: int = 0, nonmanifold: int = 0
     return ParoctError(f"{label}: manifold3d rejected the surface ({name})")
 
 
+#: Largest coordinate magnitude and smallest longest bounding-box side meshed: volumes
+#: (length cubed) and tet estimates overflow or underflow float64 beyond them.  Meshing is
+#: scale-invariant in between (a tet of edge 1e-100 and one of 1e100 mesh alike).
+MAX_COORDINATE = 1e100
+MIN_EXTENT = 1e-100
+
+
+def _check_scale(vertices: np.ndarray, label: str) -> None:
+    """Refuse coordinates beyond MAX_COORDINATE and parts smaller than MIN_EXTENT."""
+    largest = float(np.abs(vertices).max())
+    if largest > MAX_COORDINATE:
+        raise ParoctError(f"{label}: a vertex coordinate reaches {largest:.3g}; paroct meshes coordinates up to "
+                          f"{MAX_COORDINATE:.0e} in magnitude (volumes overflow beyond): scale the part")
+    extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
+    if extent < MIN_EXTENT:
+        raise ParoctError(f"{label}: the part spans only {extent:.3g} (longest side of its bounding box); paroct meshes "
+                          f"parts of {MIN_EXTENT:.0e} or more (volumes underflow below): scale the part")
+
+
 def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "surface") -> Surface:
     """Validate a triangle surface and build its solid; see load_surface."""
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -326,6 +345,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     vertices, faces, finite = _weld(vertices, faces)
     if not finite:
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
+    _check_scale(vertices, label)
     if faces.shape[0] == 0:
         raise ParoctError(f"{label}: every triangle is degenerate (repeated vertex)")
     boundary, nonmanifold, flipped = _edge_report(faces, vertices.shape[0])
