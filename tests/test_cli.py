@@ -245,6 +245,10 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["frobnicate"], "invalid choice"),
         (lambda t, s: ["check", t / "missing.vtu"], "no such file"),
         (lambda t, s: ["check", s], "no tetrahedra"),
+        (lambda t, s: ["check", _written(t / "cut.vtu", (t / "good.vtu").read_bytes()[:400])],
+         r"cannot read .*cut.vtu: not a vtu file, or a damaged one$"),
+        (lambda t, s: ["check", _written(t / "cut.msh", b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4")],
+         r"cannot read .*cut.msh \(read as gmsh and as ansys\): "),
         (lambda t, s: ["check", t / "good.vtu", "--against", _open_box(t)], "open surface"),
     ],
 )
@@ -260,6 +264,10 @@ def test_check_passes_a_valid_mesh_and_fails_broken_ones(tmp_path, capsys):
     write_mesh(tmp_path / "good.vtu", points, tets)
     rc, out, _ = _run(capsys, "check", tmp_path / "good.vtu")
     assert rc == 0 and out.splitlines()[-1] == "ok"
+    # .msh is Gmsh's and ANSYS's: an ANSYS file is read too.
+    meshio.write(tmp_path / "ansys.msh", meshio.Mesh(points, [("tetra", tets)]), file_format="ansys")
+    rc, out, _ = _run(capsys, "check", tmp_path / "ansys.msh")
+    assert rc == 0 and out.splitlines()[-1] == "ok" and "tets 162," in out
 
     flipped = tets.copy()
     flipped[0, [0, 1]] = flipped[0, [1, 0]]

@@ -5,6 +5,8 @@ meshio's 5.8, 20 and 31 s); the package's only meshio edge besides surface input
 from __future__ import annotations
 
 import base64
+import contextlib
+import io
 import os
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -276,13 +278,25 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not path.exists():
         raise ParoctError(f"no such file: {path}")
     ext = path.suffix.lower()
-    fmt = _FORMAT_OVERRIDES[ext][0] if ext in _FORMAT_OVERRIDES else None
-    try:
-        raw = meshio.read(path, file_format=fmt)
-    except (Exception, SystemExit) as exc:
-        text = str(exc).strip()
-        msg = text.splitlines()[0] if text and not isinstance(exc, SystemExit) else "malformed file"
-        raise ParoctError(f"cannot read {path}: {msg}") from None
+    # An extension several formats share (.msh: Gmsh, ANSYS) is tried as each in turn, ours first.
+    formats = [_FORMAT_OVERRIDES[ext][0]] if ext in _FORMAT_OVERRIDES else [None]
+    formats += [f for f in meshio.extension_to_filetypes.get(ext, []) if f not in formats and formats != [None]]
+    raw, first_error = None, None
+    for fmt in formats:
+        # meshio prints a reader's complaint (stdout) and its own (stderr), then exits: the
+        # reader's complaint, if it has one, is the reason.
+        printed = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(io.StringIO()):
+                raw = meshio.read(path, file_format=fmt)
+            break
+        except (Exception, SystemExit) as exc:
+            text = printed.getvalue() if isinstance(exc, SystemExit) else str(exc)
+            lines = [line.strip() for line in text.splitlines() if line.strip()]
+            first_error = first_error or (lines[0] if lines else f"not a {fmt or ext} file, or a damaged one")
+    if raw is None:
+        tried = f" (read as {' and as '.join(formats)})" if len(formats) > 1 else ""
+        raise ParoctError(f"cannot read {path}{tried}: {first_error}")
     blocks = [np.asarray(b.data, dtype=np.int64) for b in raw.cells if b.type == "tetra"]
     if not blocks:
         kinds = sorted({b.type for b in raw.cells}) or ["none"]
