@@ -308,7 +308,7 @@ def _status_error(name: str, label: str, boundary: int = 0, nonmanifold: int = 0
 
 #: Largest coordinate magnitude and smallest longest bounding-box side meshed: volumes
 #: (length cubed) and tet estimates overflow or underflow float64 beyond them.  Meshing is
-#: scale-invariant in between (a tet of edge 1e-100 and one of 1e100 mesh alike).
+#: scale-invariant in between (tets of edge 1e-99 and 1e99 give the same mesh, scaled).
 MAX_COORDINATE = 1e100
 MIN_EXTENT = 1e-100
 
@@ -345,9 +345,9 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     vertices, faces, finite = _weld(vertices, faces)
     if not finite:
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
-    _check_scale(vertices, label)
     if faces.shape[0] == 0:
         raise ParoctError(f"{label}: every triangle is degenerate (repeated vertex)")
+    _check_scale(vertices, label)
     boundary, nonmanifold, flipped = _edge_report(faces, vertices.shape[0])
     if boundary or nonmanifold or flipped:
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
