@@ -25,7 +25,7 @@ from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, ancestor_keys, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
 from .octree import FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells
 from .quality import summarize, tet_quality
-from .repair import remove_pinches
+from .repair import band_mask, remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, restuff, retarget_warps,
                        stuff, warp_targets)
@@ -474,8 +474,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     """Repair pinches, fill the report's quality, volume and topology, and drop unused points:
     the result of a pass.  points, out_tets: stuff's output; inside, targets (V,): over the
     lattice vertices, points 0..V-1 of the stuffed mesh; size: the band's longest edge."""
-    core = np.zeros(points.shape[0], dtype=bool)
-    core[: inside.shape[0]] = inside & (targets < 0)
+    core = _core(inside, targets, points.shape[0])
     out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
     stages.done("repair")
 
@@ -658,8 +657,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
     # changes level may give tets outside the bound.  Other warps near them mend most; where
     # they do not, this pass only says where the band must be finer.
-    core = inside & (targets < 0)
-    is_bad, is_needle = _outside_bound(points, out_tets, core)
+    is_bad, is_needle = _outside_bound(points, out_tets, _core(inside, targets, points.shape[0]))
     for _ in range(RETARGET_PASSES):
         if not (is_bad.any() or is_needle.any()):
             break
@@ -674,7 +672,8 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         targets = new_targets
         again = np.flatnonzero(kept < 0)
         is_bad, is_needle = is_bad[kept], is_needle[kept]
-        is_bad[again], is_needle[again] = _outside_bound(points, out_tets[again], inside & (targets < 0))
+        core = _core(inside, targets, points.shape[0])
+        is_bad[again], is_needle[again] = _outside_bound(points, out_tets[again], core)
     bad = np.flatnonzero(is_bad)
     stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
@@ -705,14 +704,22 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
 
 
+def _core(inside: np.ndarray, targets: np.ndarray, n_points: int) -> np.ndarray:
+    """Mask (n_points,) of the stuffed mesh's core vertices: the unwarped inside lattice
+    vertices (points 0..V-1; inside, targets (V,)), not the cut points after them."""
+    core = np.zeros(n_points, dtype=bool)
+    core[: inside.shape[0]] = inside & (targets < 0)
+    return core
+
+
 def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Masks (M,) of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
     included: tet_quality gives them 0 and 180 degrees), and of the others with 3r/R below
-    NEEDLE_RATIO.  core (V,): the unwarped inside lattice vertices, points 0..V-1.  Tets of
-    four core vertices are lattice tets stuffing copied, fat tets and transition templates
-    (dihedral angles in [30, 135] degrees, 3r/R >= 0.4: docs/transitions.md), so only the
-    others are measured (half of round_rod's 4.05 M tets at diag/80, the band of a thin rod)."""
-    measured = np.flatnonzero(~_all_core(tets, core))
+    NEEDLE_RATIO.  core: _core's mask.  Tets of four core vertices are lattice tets stuffing
+    copied, fat tets and transition templates (dihedral angles in [30, 135] degrees, 3r/R >=
+    0.4: docs/transitions.md), so only the band's are measured (half of round_rod's 4.05 M
+    tets at diag/80, the band of a thin rod)."""
+    measured = np.flatnonzero(band_mask(tets, core))
     quality = tet_quality(points, tets[measured])
     outside = np.zeros(tets.shape[0], dtype=bool)
     needle = np.zeros(tets.shape[0], dtype=bool)
@@ -720,20 +727,6 @@ def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> tu
     outside[measured] = bad
     needle[measured] = ~bad & (quality.radius_ratio < NEEDLE_RATIO)
     return outside, needle
-
-
-@nb.njit(cache=True, parallel=True)
-def _all_core(tets, core):
-    """Mask (M,) of the tets whose four vertices are core (ids past core's end are not)."""
-    n = core.shape[0]
-    out = np.empty(tets.shape[0], dtype=np.bool_)
-    for t in nb.prange(tets.shape[0]):
-        ok = True
-        for i in range(4):
-            v = tets[t, i]
-            ok = ok and v < n and core[v]
-        out[t] = ok
-    return out
 
 
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:
