@@ -278,9 +278,10 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not path.exists():
         raise ParoctError(f"no such file: {path}")
     ext = path.suffix.lower()
-    # An extension several formats share (.msh: Gmsh, ANSYS) is tried as each in turn, ours first.
-    formats = [_FORMAT_OVERRIDES[ext][0]] if ext in _FORMAT_OVERRIDES else [None]
-    formats += [f for f in meshio.extension_to_filetypes.get(ext, []) if f not in formats and formats != [None]]
+    formats = [None]  # meshio's choice by extension
+    if ext in _FORMAT_OVERRIDES:  # ours first, then any other format of the extension (.msh: Gmsh, ANSYS)
+        ours = _FORMAT_OVERRIDES[ext][0]
+        formats = [ours] + [f for f in meshio.extension_to_filetypes.get(ext, []) if f != ours]
     raw, first_error = None, None
     for fmt in formats:
         # meshio prints a reader's complaint (stdout) and its own (stderr), then exits: the
