@@ -161,8 +161,10 @@ def _slot_block():
 
 
 @pytest.mark.parametrize("size", [0.1, 0.07])
-def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size):
+def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size, monkeypatch):
     surface = load_surface(_slot_block())
+    if size == 0.1:  # the pass at 0.1 misses no surface vertex: halving must not fit for a local round
+        monkeypatch.setattr(mesher, "_fits", lambda *args: False)
     result = mesh(surface, size=size)
     rep = result.report
     assert rep.size < size / 2 and any("only near" in note for note in rep.notes) and not rep.warnings
@@ -177,6 +179,48 @@ def test_thin_parts_refine_only_near_their_thin_places_and_keep_the_bound(size):
     assert 30 - 1e-9 <= rep.interior_min_dihedral and rep.interior_max_dihedral <= 135
     everywhere = mesh(surface, size=rep.size, max_size=rep.max_size, thin_features=False)
     assert rep.n_tets < 0.6 * everywhere.report.n_tets
+
+
+def test_a_pass_that_misses_no_surface_vertex_halves_the_whole_band_where_that_is_cheaper(monkeypatch):
+    """At 0.1 the slot block loses the fin's volume but no surface vertex: the whole band at
+    0.05 is estimated at fewer tets than refining near the fin and slot to two element layers
+    (0.0125), and keeps the solid, so the mesh is the one asked at 0.05, far smaller."""
+    surface = load_surface(_slot_block())
+    result = mesh(surface, size=0.1)
+    rep = result.report
+    assert rep.size == pytest.approx(0.05) and rep.requested_size == 0.1 and not rep.warnings
+    assert any("the whole band at size / 2 is estimated at" in note for note in rep.notes)
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert abs(rep.volume_error) < 0.01
+    assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
+    asked = mesh(surface, size=0.05, max_size=rep.max_size, thin_features=False).mesh
+    assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
+    monkeypatch.setattr(mesher, "_fits", lambda *args: False)
+    local = mesh(surface, size=0.1).report
+    assert any("only near" in note for note in local.notes) and rep.n_tets < 0.5 * local.n_tets
+
+
+def test_when_the_halved_band_still_loses_the_rounds_start_from_it():
+    """A short fin 0.04 thick: at 0.1 it loses volume but no surface vertex, so the band is
+    halved; at 0.05 the fin is dropped (its top vertices missed), so the band is refined near
+    the fin from 0.05, not from 0.1 and not everywhere."""
+    block = manifold3d.Manifold.cube([1.0, 1.0, 0.5])
+    surface = load_surface(block + manifold3d.Manifold.cube([0.3, 0.04, 0.2]).translate([0.35, 0.48, 0.5]))
+    result = mesh(surface, size=0.1)
+    rep = result.report
+    assert rep.requested_size == 0.1 and rep.size < 0.05 / 2 and not rep.warnings
+    assert "the whole band at size / 2" in rep.notes[0]
+    assert any(note.startswith("at boundary size 0.05 ") and "misses" in note for note in rep.notes)
+    assert "only near" in rep.notes[-1]
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert abs(rep.volume_error) < 0.01
+    assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
+    everywhere = mesh(surface, size=rep.size, max_size=rep.max_size, thin_features=False)
+    assert rep.n_tets < 0.5 * everywhere.report.n_tets
 
 
 def test_without_other_warps_the_rounds_refine_until_the_bound_holds(monkeypatch):

@@ -192,7 +192,9 @@ def mesh(
     evaluated at octant corners and centres (both are clamped to at least size).
     thin_features: when the mesh loses topology (boundary components, genus), loses or gains
     more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
-    thinner than the lattice dropped), the solid is meshed again with the boundary refined
+    thinner than the lattice dropped), the solid is meshed again: if it missed no surface
+    vertex and the whole boundary at size / 2 is estimated at fewer tets than refining near the
+    thin places, at size / 2 (once); else, or if that still loses, with the boundary refined
     only near the walls and gaps thinner than 2 * size and the missed parts, to two element
     layers across each (first at most size / 8, then deeper while it still loses, down to
     min_size, default size / 16), every tet measured, other warps tried near any outside
@@ -221,20 +223,30 @@ def mesh(
 
     band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
     memory_bound = False
+    local_from, halvings = h, 1  # the band size local rounds start from; whole-band halvings tried before them
     while True:
         report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
                             input_genus=surface.genus, input_components=surface.components, stage_seconds=stage_seconds)
         attempt = _at_boundary_size(field, band)
         result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
-        if thin_features and lost and band == h and walls is not None:
-            local, why = _thin_locally(surface, field, walls, floor, budget, lost, progress, stage_seconds)
+        halve = False
+        if thin_features and lost and band == local_from and walls is not None:
+            halved = None
+            if halvings and band / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, band / 2, budget):
+                halved = estimate_tets(surface, _at_boundary_size(field, band / 2))
+            local, why, halve = _thin_locally(surface, attempt, walls, floor, budget, lost, report.missed_vertices.size,
+                                              halved, progress, stage_seconds)
             if local is not None:
+                local.report.requested_size, local.report.notes = h, notes + local.report.notes
                 return local
-            if why:
+            if halve:
+                notes.append(f"halving the whole band rather than refining near thin places: {why}")
+                local_from, halvings = band / 2, halvings - 1
+            elif why:
                 notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
                 memory_bound = why == LOCAL_MEMORY
         finer = band
-        if walls is not None and np.any(walls.thickness > 0):
+        if not halve and walls is not None and np.any(walls.thickness > 0):
             thinnest = walls.thickness[walls.thickness > 0].min()
             while finer > thinnest / 2 and finer > whole_floor:
                 finer /= 2
@@ -263,29 +275,52 @@ def mesh(
     return result
 
 
+def _local_depth(size: float, floor: float) -> int:
+    """Levels below size that local refinement may go: down to floor."""
+    return int(np.floor(np.log2(size / floor) + 1e-9))
+
+
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
-                  progress: Callable[[str], None] | None, stage_seconds: dict) -> tuple[MeshResult | None, str]:
+                  missed: int, halved: int | None, progress: Callable[[str], None] | None,
+                  stage_seconds: dict) -> tuple[MeshResult | None, str, bool]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
-    one level more while the mesh still loses topology or volume.  Returns the result, or None and
+    one level more while the mesh still loses topology or volume.  Returns the result, or None,
     why that did not succeed (no thin place found: ''; the floor or the memory budget reached;
-    the rounds stopped finding fewer tets outside the bound): then the caller refines the
-    whole band."""
+    the rounds stopped finding fewer tets outside the bound) and whether the whole band should
+    be halved (size / 2) rather than refined as far as the thinnest wall asks: then the caller
+    refines the whole band.
+
+    missed: surface vertices the pass at field.size missed; halved: estimate_tets of the whole
+    band at size / 2 (None: not allowed).  No round is made when that pass missed no surface
+    vertex and the first round's estimate (_local_tets) is above halved: what is lost then are
+    walls and gaps about as thick as the lattice, and on bumpy surfaces stuffing's own volume
+    error, about 1 % at diag/40, which no refinement near thin places mends (armadillo at
+    diag/40: three rounds, 0.49 M tets, 0.81 s; the whole band at size / 2 kept it with
+    0.10 M tets).  A dropped part (missed vertices) needs the levels only local rounds afford.
+    Both estimates are upper bounds, _local_tets 3.4-7.2 x the tets a first round made on
+    the corpus' thin parts at diag/40, estimate_tets 1.5-1.9 x the whole band's at size / 2:
+    so halving is chosen while it makes up to about twice a round's tets.  It needs no second
+    round and keeps the band on one level.  After a round, what is still lost is near thin
+    places as often as not (a plate 0.04 thick refined to 0.025 near its faces still loses 1 %),
+    so later rounds never halve."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
-    max_depth = int(np.floor(np.log2(field.size / floor) + 1e-9))
+    max_depth = _local_depth(field.size, floor)
     if max_depth < 1:  # min_size leaves no finer level to refine to
-        return None, ""
+        return None, "", False
     notes = [f"at boundary size {field.size:.4g} {lost}"]
     framed, tried = None, None
     cap = min(max_depth, WHOLE_BAND_DEPTH)
     for extra in range(2 * max_depth + 1):
-        points, depth = _thin_asks(coarse, walls, cap, extra)
+        frame, depth, wanted = _local_ask(coarse, walls, cap, extra)
         if depth.size == 0:
-            return None, ""
-        frame = _refined_frame(coarse, int(depth.max()))
+            return None, "", False
         if frame.levels > MAX_FRAME_LEVELS:
-            return None, f"a frame of {frame.levels} levels is too deep"
-        wanted = band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
+            return None, f"a frame of {frame.levels} levels is too deep", False
+        local = _local_tets(surface, field, wanted)
+        if extra == 0 and halved is not None and missed == 0 and halved < local:
+            return None, (f"the whole band at size / 2 is estimated at {halved} tets, fewer than the {local} "
+                          "of a round near them"), True
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
             framed, tried = FramedSurface.build(surface, frame, coarse.levels), None
         if tried is not None and _same_band(framed, tried, wanted):
@@ -296,8 +331,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         tried = wanted
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
-            if _local_tets(surface, field, wanted) * BYTES_PER_TET > budget:
-                return None, LOCAL_MEMORY
+            if local * BYTES_PER_TET > budget:
+                return None, LOCAL_MEMORY, False
             report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
                                 solid_volume=surface.volume, input_genus=surface.genus,
                                 input_components=surface.components, stage_seconds=stage_seconds)
@@ -318,9 +353,10 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             window = tuple(band_levels(frame, coarse.levels, anchors, np.full(changed.shape[0], coarse.levels), ring).keys
                            for ring in (WINDOW_RING, WINDOW_RING - 2))
             wanted = merged
+            local = _local_tets(surface, field, wanted)
         if result is None:
             return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
-                          f"degrees after {rounds} measure-and-refine rounds")
+                          f"degrees after {rounds} measure-and-refine rounds"), False
         known = walls.thickness[walls.thickness < 2 * coarse.h] > 0  # as _thin_asks picks its samples
         beyond = int(np.max(depth - _thin_asks(coarse, walls, max_depth, 0)[1], initial=0, where=known))
         layers = f", {beyond} level{'s' * (beyond > 1)} finer than two layers need" if beyond > 0 else ""
@@ -333,12 +369,12 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         still = _losses(report, surface)
         if not still:
             report.notes = notes
-            return result, ""
+            return result, "", False
         notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
         cap = _next_cap(depth, cap, max_depth)
         if cap is None:
             break
-    return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost"
+    return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost", False
 
 
 def _same_band(framed: FramedSurface, a: BandLevels, b: BandLevels) -> bool:
@@ -569,6 +605,16 @@ NEEDLE_RATIO = 0.15
 def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
     """The frame ``depth`` levels finer: same origin, so its lattice holds this one's."""
     return FatFrame(origin=frame.origin, h=frame.h / 2**depth, levels=frame.levels + depth)
+
+
+def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int) -> tuple[FatFrame, np.ndarray, BandLevels | None]:
+    """The finest frame, the depths (K,) of _thin_asks and the band asked for in that frame
+    (None if no wall or gap asks: K = 0, or a frame deeper than MAX_FRAME_LEVELS)."""
+    points, depth = _thin_asks(coarse, walls, max_depth, extra)
+    frame = _refined_frame(coarse, int(depth.max(initial=0)))
+    if depth.size == 0 or frame.levels > MAX_FRAME_LEVELS:
+        return frame, depth, None
+    return frame, depth, band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
 
 
 def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int) -> tuple[np.ndarray, np.ndarray]:
