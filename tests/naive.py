@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from paroct.octant import MAX_LEVEL
@@ -62,6 +64,13 @@ def _det3(m):
 
 def _cross(u, v):
     return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def unit_normal(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> list[float]:
+    """Unit normal of triangle abc by the right-hand rule; zeros if it is degenerate."""
+    n = _cross([b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)])
+    length = math.sqrt(sum(x * x for x in n))
+    return [x / length for x in n] if length > 0 else [0.0, 0.0, 0.0]
 
 
 def tet_radius_ratio(p: np.ndarray) -> float:

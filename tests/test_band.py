@@ -16,6 +16,7 @@ from paroct.rays import (edge_cut_fractions, row_crossings, segment_cut_fraction
 from paroct.stuffing import DIHEDRAL_BOUND
 from paroct.surface import load_surface
 
+from . import naive
 from .naive import triangle_meets_cube
 
 ML = octant.MAX_LEVEL
@@ -150,6 +151,22 @@ def test_crossings_of_the_triangles_near_some_cells_cut_their_unit_edges_as_all_
                                   start_in[cut])
         assert np.array_equal(every[0], some[0]) and np.array_equal(every[1], some[1])
     assert cut_edges > 700
+
+
+def test_face_normals_equal_the_slow_unit_normals():
+    from paroct.features import face_normals
+
+    rng = np.random.default_rng(7)
+    vertices = rng.normal(size=(200, 3)) * 10.0 ** rng.integers(-3, 4, size=(200, 1))
+    faces = rng.integers(0, 200, size=(500, 3))
+    faces[:20, 1] = faces[:20, 0]  # degenerate: a repeated vertex
+    vertices[199] = vertices[198] * 3 - vertices[197] * 2  # collinear with 197 and 198
+    faces[20] = [197, 198, 199]
+    got = face_normals(vertices, faces)
+    want = np.array([naive.unit_normal(*vertices[f]) for f in faces])
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
+    norms = np.linalg.norm(got, axis=1)
+    assert np.all(got[:20] == 0) and np.allclose(norms[norms > 0], 1.0) and np.count_nonzero(norms) > 450
 
 
 def _slot_block():
