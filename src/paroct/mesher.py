@@ -193,11 +193,12 @@ def mesh(
     thin_features: when the mesh loses topology (boundary components, genus), loses or gains
     more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
     thinner than the lattice dropped), the solid is meshed again: if it missed no surface
-    vertex and the whole boundary at size / 2 is estimated at fewer tets than refining near the
-    thin places, at size / 2 (once); else, or if that still loses, with the boundary refined
-    only near the walls and gaps thinner than 2 * size and the missed parts, to two element
-    layers across each (first at most size / 8, then deeper while it still loses, down to
-    min_size, default size / 16), every tet measured, other warps tried near any outside
+    vertex, lost less than 4 % of the volume and the whole boundary at size / 2 is estimated at
+    fewer tets than refining near the thin places, at size / 2; else, or if that still loses,
+    with the boundary refined only near the walls and gaps thinner than 2 * size and the
+    missed parts, to two element layers across each (first at most size / 8, then deeper
+    while it still loses, down to min_size, default size / 16), every tet measured, other
+    warps tried near any outside
     [10.7, 164.8] degrees (and near needles, 3r/R below NEEDLE_RATIO) and the band refined
     where they do not mend an angle; if that does not keep the solid, the whole boundary size
     shrinks by halves instead, as far as max_memory allows (not below size / 8 unless
@@ -223,30 +224,39 @@ def mesh(
 
     band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
     memory_bound = False
-    local_from, halvings = h, 1  # the band size local rounds start from; whole-band halvings tried before them
     while True:
         report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
                             input_genus=surface.genus, input_components=surface.components, stage_seconds=stage_seconds)
         attempt = _at_boundary_size(field, band)
         result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
-        halve = False
-        if thin_features and lost and band == local_from and walls is not None:
+        if thin_features and lost and band == h and walls is not None:
             halved = None
-            if halvings and band / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, band / 2, budget):
-                halved = estimate_tets(surface, _at_boundary_size(field, band / 2))
-            local, why, halve = _thin_locally(surface, attempt, walls, floor, budget, lost, report.missed_vertices.size,
-                                              halved, progress, stage_seconds)
-            if local is not None:
-                local.report.requested_size, local.report.notes = h, notes + local.report.notes
-                return local
+            if (report.missed_vertices.size == 0 and abs(report.volume_error) < VOLUME_LOSS_WARNING * HALVING_GAIN
+                    and h / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, h / 2, budget)):
+                halved = estimate_tets(surface, _at_boundary_size(field, h / 2))
+            local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress, stage_seconds)
+            tried = []
             if halve:
-                notes.append(f"halving the whole band rather than refining near thin places: {why}")
-                local_from, halvings = band / 2, halvings - 1
-            elif why:
+                half = MeshReport(size=h / 2, requested_size=h, levels=0, max_size=field.max_size,
+                                  solid_volume=surface.volume, input_genus=surface.genus,
+                                  input_components=surface.components, stage_seconds=stage_seconds)
+                kept, still, _, _ = _mesh_at(surface, _at_boundary_size(field, h / 2), half, progress)
+                if not still:
+                    half.notes = [f"at boundary size {h:.4g} {lost}", f"boundary refined to {h / 2:.4g} everywhere: {why}"]
+                    return kept
+                tried = [f"boundary refined to {h / 2:.4g} everywhere ({why}): at {h / 2:.4g} {still}; "
+                         f"refining near thin places from {h:.4g} instead"]
+                local, why, _ = _thin_locally(surface, field, walls, floor, budget, lost, None, progress, stage_seconds)
+            if local is not None:
+                first, *rest = local.report.notes
+                local.report.notes = [*notes, first, *tried, *rest]
+                return local
+            notes.extend(tried)
+            if why:
                 notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
                 memory_bound = why == LOCAL_MEMORY
         finer = band
-        if not halve and walls is not None and np.any(walls.thickness > 0):
+        if walls is not None and np.any(walls.thickness > 0):
             thinnest = walls.thickness[walls.thickness > 0].min()
             while finer > thinnest / 2 and finer > whole_floor:
                 finer /= 2
@@ -281,7 +291,7 @@ def _local_depth(size: float, floor: float) -> int:
 
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
-                  missed: int, halved: int | None, progress: Callable[[str], None] | None,
+                  halved: int | None, progress: Callable[[str], None] | None,
                   stage_seconds: dict) -> tuple[MeshResult | None, str, bool]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
@@ -291,19 +301,9 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     be halved (size / 2) rather than refined as far as the thinnest wall asks: then the caller
     refines the whole band.
 
-    missed: surface vertices the pass at field.size missed; halved: estimate_tets of the whole
-    band at size / 2 (None: not allowed).  No round is made when that pass missed no surface
-    vertex and the first round's estimate (_local_tets) is above halved: what is lost then are
-    walls and gaps about as thick as the lattice, and on bumpy surfaces stuffing's own volume
-    error, about 1 % at diag/40, which no refinement near thin places mends (armadillo at
-    diag/40: three rounds, 0.49 M tets, 0.81 s; the whole band at size / 2 kept it with
-    0.10 M tets).  A dropped part (missed vertices) needs the levels only local rounds afford.
-    Both estimates are upper bounds, _local_tets 3.4-7.2 x the tets a first round made on
-    the corpus' thin parts at diag/40, estimate_tets 1.5-1.9 x the whole band's at size / 2:
-    so halving is chosen while it makes up to about twice a round's tets.  It needs no second
-    round and keeps the band on one level.  After a round, what is still lost is near thin
-    places as often as not (a plate 0.04 thick refined to 0.025 near its faces still loses 1 %),
-    so later rounds never halve."""
+    halved: estimate_tets of the whole band at size / 2, or None.  If the first round's
+    estimate (_local_tets) is above it, no round is made: (None, why, True), and the caller
+    meshes the whole band at size / 2 (HALVING_GAIN)."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
     if max_depth < 1:  # min_size leaves no finer level to refine to
@@ -318,7 +318,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         if frame.levels > MAX_FRAME_LEVELS:
             return None, f"a frame of {frame.levels} levels is too deep", False
         local = _local_tets(surface, field, wanted)
-        if extra == 0 and halved is not None and missed == 0 and halved < local:
+        if extra == 0 and halved is not None and halved < local:
             return None, (f"the whole band at size / 2 is estimated at {halved} tets, fewer than the {local} "
                           "of a round near them"), True
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
@@ -395,6 +395,21 @@ def _next_cap(depth: np.ndarray, cap: int, max_depth: int) -> int | None:
     return cap + 1 if cap < max_depth else None
 
 
+#: Before any round near thin places, the whole band is halved (size / 2) when the pass at size
+#: missed no surface vertex, lost or gained less than HALVING_GAIN x VOLUME_LOSS_WARNING of the
+#: volume, and is estimated at fewer tets than the first round.  Stuffing's volume error is
+#: second order in size (a chord's), so halving divides it by about 4 (4.2-6.8 measured on the
+#: corpus where no wall is lost).  What such a pass loses are walls about as thick as the
+#: lattice and, on bumpy surfaces, that error itself, which no round near thin places mends:
+#: armadillo at diag/40 took three rounds, 0.49 M tets in 0.81 s; the whole band at size / 2
+#: keeps it with 0.10 M tets in 0.19 s.  A dropped part (missed vertices) needs the levels only
+#: rounds afford.  Both estimates are upper bounds, _local_tets 3.4-7.2 x the tets of a first
+#: round on the corpus' thin parts at diag/40, estimate_tets 1.5-1.9 x the whole band's, so
+#: halving is chosen while it makes up to about twice a round's tets: it needs no second round
+#: and keeps the band on one level.  If the halved band still loses, the rounds start from size,
+#: as without it (from size / 2 they would go a level deeper: fea_part at diag/60, 6.1 M tets
+#: against 2.5 M).
+HALVING_GAIN = 4
 #: Why _thin_locally stopped when the next round would not fit in memory.
 LOCAL_MEMORY = "it would not fit in memory (max_memory)"
 #: Default min_size: size divided by this.  Only the band near thin places goes that deep by
