@@ -193,16 +193,15 @@ def mesh(
     thin_features: when the mesh loses topology (boundary components, genus), loses or gains
     more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
     thinner than the lattice dropped), the solid is meshed again: if it missed no surface
-    vertex, lost less than 4 % of the volume and the whole boundary at size / 2 is estimated at
-    fewer tets than refining near the thin places, at size / 2; else, or if that still loses,
-    with the boundary refined only near the walls and gaps thinner than 2 * size and the
-    missed parts, to two element layers across each (first at most size / 8, then deeper
-    while it still loses, down to min_size, default size / 16), every tet measured, other
-    warps tried near any outside
-    [10.7, 164.8] degrees (and near needles, 3r/R below NEEDLE_RATIO) and the band refined
-    where they do not mend an angle; if that does not keep the solid, the whole boundary size
-    shrinks by halves instead, as far as max_memory allows (not below size / 8 unless
-    min_size is given).  The report's notes say what was done.  False keeps size and only
+    vertex, lost or gained under 4 % of the volume and the whole boundary at size / 2 is
+    estimated at fewer tets than refining near the thin places, at size / 2; else, or if that
+    still loses, with the boundary refined only near the walls and gaps thinner than 2 * size
+    and the missed parts, to two element layers across each (first at most size / 8, then
+    deeper while it still loses, down to min_size, default size / 16), every tet measured,
+    other warps tried near any outside [10.7, 164.8] degrees (and near needles, 3r/R below
+    NEEDLE_RATIO) and the band refined where they do not mend an angle; if that does not keep
+    the solid, the whole boundary size shrinks by halves instead, as far as max_memory allows
+    (not below size / 8 unless min_size is given).  The report's notes say what was done.  False keeps size and only
     warns.  A mesh that keeps less than half the solid's volume raises ParoctError, as one
     with no tets does.  max_memory: bytes the run may use (default: the machine's available
     memory); a size that would need more is refused before any work.  progress: called with
@@ -225,8 +224,7 @@ def mesh(
     band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
     memory_bound = False
     while True:
-        report = MeshReport(size=band, requested_size=h, levels=0, max_size=field.max_size, solid_volume=surface.volume,
-                            input_genus=surface.genus, input_components=surface.components, stage_seconds=stage_seconds)
+        report = _pass_report(surface, field, band, stage_seconds)
         attempt = _at_boundary_size(field, band)
         result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
         if thin_features and lost and band == h and walls is not None:
@@ -237,9 +235,7 @@ def mesh(
             local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress, stage_seconds)
             tried = []
             if halve:
-                half = MeshReport(size=h / 2, requested_size=h, levels=0, max_size=field.max_size,
-                                  solid_volume=surface.volume, input_genus=surface.genus,
-                                  input_components=surface.components, stage_seconds=stage_seconds)
+                half = _pass_report(surface, field, h / 2, stage_seconds)
                 kept, still, _, _ = _mesh_at(surface, _at_boundary_size(field, h / 2), half, progress)
                 if not still:
                     half.notes = [f"at boundary size {h:.4g} {lost}", f"boundary refined to {h / 2:.4g} everywhere: {why}"]
@@ -285,6 +281,14 @@ def mesh(
     return result
 
 
+def _pass_report(surface: Surface, field: SizeField, band: float, stage_seconds: dict) -> MeshReport:
+    """An empty report of one pass at boundary size band for the request field (its size is
+    the one asked); stage_seconds is shared, so stage times add up over the passes."""
+    return MeshReport(size=band, requested_size=field.size, levels=0, max_size=field.max_size,
+                      solid_volume=surface.volume, input_genus=surface.genus, input_components=surface.components,
+                      stage_seconds=stage_seconds)
+
+
 def _local_depth(size: float, floor: float) -> int:
     """Levels below size that local refinement may go: down to floor."""
     return int(np.floor(np.log2(size / floor) + 1e-9))
@@ -295,15 +299,12 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                   stage_seconds: dict) -> tuple[MeshResult | None, str, bool]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
-    one level more while the mesh still loses topology or volume.  Returns the result, or None,
-    why that did not succeed (no thin place found: ''; the floor or the memory budget reached;
-    the rounds stopped finding fewer tets outside the bound) and whether the whole band should
-    be halved (size / 2) rather than refined as far as the thinnest wall asks: then the caller
-    refines the whole band.
-
-    halved: estimate_tets of the whole band at size / 2, or None.  If the first round's
-    estimate (_local_tets) is above it, no round is made: (None, why, True), and the caller
-    meshes the whole band at size / 2 (HALVING_GAIN)."""
+    one level more while the mesh still loses topology or volume.  Returns (result, '', False);
+    or (None, why, False) when that did not succeed (no thin place found: ''; the floor or the
+    memory budget reached; the rounds stopped finding fewer tets outside the bound), and the
+    caller refines the whole band; or (None, why, True) when no round was made because halved,
+    estimate_tets of the whole band at size / 2 (None: not to be tried), is below the first
+    round's _local_tets, and the caller tries the whole band at size / 2 (HALVING_GAIN)."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
     if max_depth < 1:  # min_size leaves no finer level to refine to
@@ -333,9 +334,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if local * BYTES_PER_TET > budget:
                 return None, LOCAL_MEMORY, False
-            report = MeshReport(size=frame.h, requested_size=field.size, levels=0, max_size=field.max_size,
-                                solid_volume=surface.volume, input_genus=surface.genus,
-                                input_components=surface.components, stage_seconds=stage_seconds)
+            report = _pass_report(surface, field, frame.h, stage_seconds)
             result, asks = _mesh_locally(surface, field, framed, wanted, report, progress, window)
             if result is not None:
                 break
