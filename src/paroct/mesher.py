@@ -201,11 +201,11 @@ def mesh(
     other warps tried near any outside [10.7, 164.8] degrees (and near needles, 3r/R below
     NEEDLE_RATIO) and the band refined where they do not mend an angle; if that does not keep
     the solid, the whole boundary size shrinks by halves instead, as far as max_memory allows
-    (not below size / 8 unless min_size is given).  The report's notes say what was done.  False keeps size and only
-    warns.  A mesh that keeps less than half the solid's volume raises ParoctError, as one
-    with no tets does.  max_memory: bytes the run may use (default: the machine's available
-    memory); a size that would need more is refused before any work.  progress: called with
-    each stage's name when it ends.
+    (not below size / 8 unless min_size is given).  The report's notes say what was done.
+    False keeps size and only warns.  A mesh that keeps less than half the solid's volume
+    raises ParoctError, as one with no tets does.  max_memory: bytes the run may use
+    (default: the machine's available memory); a size that would need more is refused before
+    any work.  progress: called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) else load_surface(source)
@@ -232,13 +232,15 @@ def mesh(
             if (report.missed_vertices.size == 0 and abs(report.volume_error) < VOLUME_LOSS_WARNING * HALVING_GAIN
                     and h / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, h / 2, budget)):
                 halved = estimate_tets(surface, _at_boundary_size(field, h / 2))
-            local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress, stage_seconds)
+            local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress,
+                                              stage_seconds)
             tried = []
             if halve:
                 half = _pass_report(surface, field, h / 2, stage_seconds)
                 kept, still, _, _ = _mesh_at(surface, _at_boundary_size(field, h / 2), half, progress)
                 if not still:
-                    half.notes = [f"at boundary size {h:.4g} {lost}", f"boundary refined to {h / 2:.4g} everywhere: {why}"]
+                    half.notes = [f"at boundary size {h:.4g} {lost}",
+                                  f"boundary refined to {h / 2:.4g} everywhere: {why}"]
                     return kept
                 tried = [f"boundary refined to {h / 2:.4g} everywhere ({why}): at {h / 2:.4g} {still}; "
                          f"refining near thin places from {h:.4g} instead"]
@@ -621,7 +623,8 @@ def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
     return FatFrame(origin=frame.origin, h=frame.h / 2**depth, levels=frame.levels + depth)
 
 
-def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int) -> tuple[FatFrame, np.ndarray, BandLevels | None]:
+def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int,
+               extra: int) -> tuple[FatFrame, np.ndarray, BandLevels | None]:
     """The finest frame, the depths (K,) of _thin_asks and the band asked for in that frame
     (None if no wall or gap asks: K = 0, or a frame deeper than MAX_FRAME_LEVELS)."""
     points, depth = _thin_asks(coarse, walls, max_depth, extra)

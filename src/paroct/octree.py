@@ -507,8 +507,8 @@ def _insulation_parents(parents, level):
     neighbours at ``level - 1`` or finer: those are the parent's same-size neighbours.
     Parents near each other in key order share most of their neighbours: a neighbour already
     in a small direct-mapped table of those listed is not listed again, so the list holds
-    each about once instead of about twelve times (round_rod diag/80), and the dedupe that follows sorts
-    that much less (the list may still repeat keys, in any order).
+    each about once instead of about twelve times (round_rod diag/80), and the dedupe that
+    follows sorts that much less (the list may still repeat keys, in any order).
     """
     side = octant_len(level - 1)
     root = np.int64(1) << MAX_LEVEL
