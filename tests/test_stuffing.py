@@ -14,8 +14,9 @@ import pytest
 from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _star_score, _warped, collect_cut_edges, mixed_tets,
-                              restuff, retarget_warps, stuff, warp_targets)
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _signs, _star_score, _stencil_counts, _stencils,
+                              _stencils_in_chunks, _warped, collect_cut_edges, mixed_tets, restuff, retarget_warps,
+                              stuff, warp_targets)
 from paroct.topology import match_faces
 
 from .naive import star_violation
@@ -281,6 +282,27 @@ def _radius_ratios(points, out, coords):
     lattice_ids = np.where(out < coords.shape[0], out, 0)
     on_box = np.any((out < coords.shape[0]) & _on_box(coords)[lattice_ids], axis=1)
     return np.where(on_box, 1.0, np.where(q.volume > 0, q.radius_ratio, 0.0))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
+    """The parallel driver hands chunks of lattice tets to the serial kernel: same tets, same
+    touched flags, for every prefix of the lattice tets (down to fewer tets than chunks)."""
+    k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
+    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+    signs = _signs(inside, targets)
+    for n in (tets.shape[0], 37, 1):
+        part = np.ascontiguousarray(tets[:n])
+        offsets = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(_stencil_counts(part, signs), out=offsets[1:])
+        outputs = []
+        for kernel in (_stencils, _stencils_in_chunks):
+            out = np.full((int(offsets[-1]), 4), -1, dtype=np.int32)
+            touched = np.zeros(out.shape[0], dtype=np.bool_)
+            assert kernel(part, signs, coords, cuts.table, coords.shape[0], PRISM_TETS, offsets, out, touched) == 0
+            outputs.append((out, touched))
+        assert np.array_equal(outputs[0][0], outputs[1][0]) and np.array_equal(outputs[0][1], outputs[1][1])
+        assert (outputs[0][0] >= 0).all()
 
 
 @pytest.mark.parametrize("seed", range(4))
