@@ -284,6 +284,16 @@ def _radius_ratios(points, out, coords):
     return np.where(on_box, 1.0, np.where(q.volume > 0, q.radius_ratio, 0.0))
 
 
+@pytest.mark.parametrize("n_tets", [0, 1, 5, 63, 64, 65, 1000])
+def test_mixed_tets_are_the_rows_of_both_classes_in_order(n_tets):
+    rng = np.random.default_rng(n_tets)
+    inside = rng.random(50) < 0.5
+    tets = rng.integers(0, 50, (n_tets, 4)).astype(np.int32)
+    want = tets[inside[tets].any(axis=1) & ~inside[tets].all(axis=1)]
+    got = mixed_tets(tets, inside)
+    assert got.dtype == tets.dtype and np.array_equal(got, want.reshape(-1, 4))
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
     """The parallel driver hands chunks of lattice tets to the serial kernel: same tets, same

@@ -57,20 +57,33 @@ def mixed_rows(ids, classes):
     return out
 
 
-@nb.njit(cache=True)
+#: Chunks of tets the parallel count-and-fill kernels hand to the threads.
+TET_CHUNKS = 64
+
+
+@nb.njit(cache=True, parallel=True)
 def mixed_tets(tets, inside):
     """The tets (K, 4) whose vertices are not all of one class, in order (tets[mask] without
-    the mask and numpy's slow boolean row gather)."""
-    n = 0
-    for t in range(tets.shape[0]):
-        n += _is_mixed(tets, t, inside)
-    out = np.empty((n, 4), dtype=tets.dtype)
-    n = 0
-    for t in range(tets.shape[0]):
-        if _is_mixed(tets, t, inside):
-            for i in range(4):
-                out[n, i] = tets[t, i]
-            n += 1
+    the mask and numpy's slow boolean row gather).  Count per chunk, prefix sum, fill: each
+    thread writes only its chunks' rows."""
+    m = tets.shape[0]
+    n_chunks = max(min(m, TET_CHUNKS), 1)
+    starts = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        n = 0
+        for t in range(c * m // n_chunks, (c + 1) * m // n_chunks):
+            n += _is_mixed(tets, t, inside)
+        starts[c + 1] = n
+    for c in range(n_chunks):
+        starts[c + 1] += starts[c]
+    out = np.empty((starts[n_chunks], 4), dtype=tets.dtype)
+    for c in nb.prange(n_chunks):
+        n = starts[c]
+        for t in range(c * m // n_chunks, (c + 1) * m // n_chunks):
+            if _is_mixed(tets, t, inside):
+                for i in range(4):
+                    out[n, i] = tets[t, i]
+                n += 1
     return out
 
 
@@ -493,10 +506,6 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
     return 1
 
 
-#: Chunks of lattice tets _stencils_in_chunks hands to the threads.
-STENCIL_CHUNKS = 64
-
-
 @nb.njit(cache=True)
 def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touched):
     """Stencil tets of lattice tet t into out[offsets[t]:offsets[t + 1]]; touched[k] is False
@@ -530,7 +539,7 @@ def _stencils_in_chunks(tets, signs, coords, table, n_lattice, prism, offsets, o
     tets' rows of out (offsets are absolute), so the result is the same.  The serial kernel is
     called, not inlined, so the parallel loop compiles in seconds."""
     n = tets.shape[0]
-    n_chunks = min(n, STENCIL_CHUNKS)
+    n_chunks = min(n, TET_CHUNKS)
     cyclic = np.zeros(max(n_chunks, 1), dtype=np.int64)
     for c in nb.prange(n_chunks):
         a = c * n // n_chunks
