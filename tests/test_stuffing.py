@@ -294,6 +294,16 @@ def test_mixed_tets_are_the_rows_of_both_classes_in_order(n_tets):
     assert got.dtype == tets.dtype and np.array_equal(got, want.reshape(-1, 4))
 
 
+def test_warped_moves_the_warped_vertices_onto_their_cut_points_and_appends_the_cut_points():
+    k = next(k for k in range(20) if (_sphere_cuts(0, k)[3][3] >= 0).any())
+    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(0, k)
+    points, signs = _warped(x, inside, cuts, targets)
+    want = np.concatenate([x, cuts.points])
+    want[: x.shape[0]][targets >= 0] = cuts.points[targets[targets >= 0]]
+    assert np.array_equal(points, want)
+    assert np.array_equal(signs, np.where(targets >= 0, 0, np.where(inside, 1, -1)))
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
     """The parallel driver hands chunks of lattice tets to the serial kernel: same tets, same

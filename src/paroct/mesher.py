@@ -959,12 +959,12 @@ def _faces_near_unit_edges(frame: FatFrame, buckets: FaceBuckets, coords: np.nda
     return faces_meeting_cells(buckets, ancestor_keys(morton_keys(at), buckets.level), n_faces)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _along_edges(coords, starts, ends, fracs):
     """Points (E, 3) float64 at fraction fracs[e] from coords[starts[e]] to coords[ends[e]]
     (coords[starts] + fracs[:, None] * (coords[ends] - coords[starts]), same rounding)."""
     out = np.empty((starts.shape[0], 3))
-    for e in range(starts.shape[0]):
+    for e in nb.prange(starts.shape[0]):
         for i in range(3):
             a = coords[starts[e], i]
             out[e, i] = float(a) + fracs[e] * float(coords[ends[e], i] - a)

@@ -177,7 +177,7 @@ def _warp(n_vertices, starts, ends, fracs, lengths, start_reach, end_reach):
     return target
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _edge_reach(coords, starts, ends, spacing, to_space, alpha_long, alpha_short):
     """Space length in units of h (E,) and the warp reach of each end (E,), (E,) (see
     warp_targets)."""
@@ -185,7 +185,7 @@ def _edge_reach(coords, starts, ends, spacing, to_space, alpha_long, alpha_short
     lengths = np.empty(n)
     start_reach = np.empty(n)
     end_reach = np.empty(n)
-    for e in range(n):
+    for e in nb.prange(n):
         d0 = coords[ends[e], 0] - coords[starts[e], 0]
         d1 = coords[ends[e], 1] - coords[starts[e], 1]
         d2 = coords[ends[e], 2] - coords[starts[e], 2]
@@ -603,10 +603,25 @@ def _warped(lattice_points: np.ndarray, inside: np.ndarray, cuts: CutEdges,
             targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Points (V + E, 3): the lattice vertices where the warps put them, then the cut points;
     and signs (V,) int8: +1 inside, -1 outside, 0 warped onto the surface."""
-    warped = targets >= 0
-    points = np.concatenate([lattice_points, cuts.points])
-    points[: lattice_points.shape[0]][warped] = cuts.points[targets[warped]]
-    return points, _signs(inside, targets)
+    return _warped_points(lattice_points, cuts.points, targets, inside)
+
+
+@nb.njit(cache=True, parallel=True)
+def _warped_points(lattice_points, cut_points, targets, inside):
+    """_warped's points and signs in one parallel pass (numpy's concatenate, boolean gather
+    and _signs took 25 ms on a 1.2 M-tet band)."""
+    n = lattice_points.shape[0]
+    points = np.empty((n + cut_points.shape[0], 3))
+    signs = np.empty(n, dtype=np.int8)
+    for v in nb.prange(n):
+        w = targets[v]
+        for i in range(3):
+            points[v, i] = cut_points[w, i] if w >= 0 else lattice_points[v, i]
+        signs[v] = 0 if w >= 0 else (1 if inside[v] else -1)
+    for e in nb.prange(cut_points.shape[0]):
+        for i in range(3):
+            points[n + e, i] = cut_points[e, i]
+    return points, signs
 
 
 def _signs(inside: np.ndarray, targets: np.ndarray) -> np.ndarray:
