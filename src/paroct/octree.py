@@ -169,54 +169,57 @@ def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, le
     return _depth_first(_MEETS_BOX, lo, hi, np.int64(frame.levels), np.int64(level), no_seeds, no_seeds.astype(np.int8))
 
 
-@nb.njit(cache=True, inline="always")
-def _axis_separates(ax, ay, az, ux, uy, uz, vx, vy, vz, wx, wy, wz, half):
-    """True iff the axis separates the triangle u, v, w (relative to the box centre) from the box."""
-    p0 = ax * ux + ay * uy + az * uz
-    p1 = ax * vx + ay * vy + az * vz
-    p2 = ax * wx + ay * wy + az * wz
-    r = half * (abs(ax) + abs(ay) + abs(az))
-    return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
+#: Separating axes a triangle is tested on besides the three box axes: its normal and the
+#: cross products of its three edges with the three box axes (Akenine-Moller 2001).
+_SAT_AXES = 10
 
 
 @nb.njit(cache=True, inline="always")
-def _edge_axes_separate(ex, ey, ez, ux, uy, uz, vx, vy, vz, wx, wy, wz, half):
-    """True iff a cross product of the triangle edge e with a box axis separates them."""
-    return (_axis_separates(0.0, -ez, ey, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
-            or _axis_separates(ez, 0.0, -ex, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
-            or _axis_separates(-ey, ex, 0.0, ux, uy, uz, vx, vy, vz, wx, wy, wz, half))
+def _triangle_axes(tri, half, axes, low, high, reach):
+    """Fill the separating-axis data of a triangle (3, 3) against cubes of half side ``half``:
+    axes (10, 3) (normal, then edge k x box axis j), the triangle's projection [low, high] on
+    each and the cube's half extent ``reach`` on each.  Then a cube of centre c meets the
+    triangle iff no axis a has low - a.c > reach or high - a.c < -reach (and the boxes overlap)."""
+    for k in range(3):
+        j = (k + 1) % 3
+        ex = tri[j, 0] - tri[k, 0]
+        ey = tri[j, 1] - tri[k, 1]
+        ez = tri[j, 2] - tri[k, 2]
+        for i in range(3):
+            row = 1 + 3 * k + i
+            axes[row, i] = 0.0
+            axes[row, (i + 1) % 3] = -(ez, ex, ey)[i]
+            axes[row, (i + 2) % 3] = (ey, ez, ex)[i]
+    e0 = (tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2])
+    e1 = (tri[2, 0] - tri[1, 0], tri[2, 1] - tri[1, 1], tri[2, 2] - tri[1, 2])
+    axes[0, 0] = e0[1] * e1[2] - e0[2] * e1[1]
+    axes[0, 1] = e0[2] * e1[0] - e0[0] * e1[2]
+    axes[0, 2] = e0[0] * e1[1] - e0[1] * e1[0]
+    for a in range(_SAT_AXES):
+        p0 = axes[a, 0] * tri[0, 0] + axes[a, 1] * tri[0, 1] + axes[a, 2] * tri[0, 2]
+        p1 = axes[a, 0] * tri[1, 0] + axes[a, 1] * tri[1, 1] + axes[a, 2] * tri[1, 2]
+        p2 = axes[a, 0] * tri[2, 0] + axes[a, 1] * tri[2, 1] + axes[a, 2] * tri[2, 2]
+        low[a] = min(p0, p1, p2)
+        high[a] = max(p0, p1, p2)
+        reach[a] = half * (abs(axes[a, 0]) + abs(axes[a, 1]) + abs(axes[a, 2]))
 
 
-@nb.njit(cache=True)
-def triangle_meets_cube(tri, lo, side):
-    """True iff the closed triangle tri (3, 3) meets the closed cube lo + [0, side]^3.
-
-    Separating-axis test (Akenine-Moller 2001): the cube's 3 normals, the triangle's
-    normal and the 9 cross products of their edges.  Float; callers widen the cube by a
-    margin so that rounding can only add cubes.  Scalars only: it runs once a candidate cell.
-    """
-    half = 0.5 * side
-    cx, cy, cz = lo[0] + half, lo[1] + half, lo[2] + half
-    ux, uy, uz = tri[0, 0] - cx, tri[0, 1] - cy, tri[0, 2] - cz
-    vx, vy, vz = tri[1, 0] - cx, tri[1, 1] - cy, tri[1, 2] - cz
-    wx, wy, wz = tri[2, 0] - cx, tri[2, 1] - cy, tri[2, 2] - cz
-    if min(ux, vx, wx) > half or max(ux, vx, wx) < -half:
+@nb.njit(cache=True, inline="always")
+def _cube_meets_triangle(tri, axes, low, high, reach, cx, cy, cz, half):
+    """True iff the closed cube of centre (cx, cy, cz) and half side ``half`` meets the triangle
+    whose _triangle_axes data these are: the separating-axis test, float.  Callers widen the
+    cube by a margin so that rounding can only add cubes."""
+    if min(tri[0, 0], tri[1, 0], tri[2, 0]) > cx + half or max(tri[0, 0], tri[1, 0], tri[2, 0]) < cx - half:
         return False
-    if min(uy, vy, wy) > half or max(uy, vy, wy) < -half:
+    if min(tri[0, 1], tri[1, 1], tri[2, 1]) > cy + half or max(tri[0, 1], tri[1, 1], tri[2, 1]) < cy - half:
         return False
-    if min(uz, vz, wz) > half or max(uz, vz, wz) < -half:
+    if min(tri[0, 2], tri[1, 2], tri[2, 2]) > cz + half or max(tri[0, 2], tri[1, 2], tri[2, 2]) < cz - half:
         return False
-    e0x, e0y, e0z = vx - ux, vy - uy, vz - uz
-    e1x, e1y, e1z = wx - vx, wy - vy, wz - vz
-    e2x, e2y, e2z = ux - wx, uy - wy, uz - wz
-    nx = e0y * e1z - e0z * e1y
-    ny = e0z * e1x - e0x * e1z
-    nz = e0x * e1y - e0y * e1x
-    if _axis_separates(nx, ny, nz, ux, uy, uz, vx, vy, vz, wx, wy, wz, half):
-        return False
-    return not (_edge_axes_separate(e0x, e0y, e0z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
-                or _edge_axes_separate(e1x, e1y, e1z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half)
-                or _edge_axes_separate(e2x, e2y, e2z, ux, uy, uz, vx, vy, vz, wx, wy, wz, half))
+    for a in range(_SAT_AXES):
+        centre = axes[a, 0] * cx + axes[a, 1] * cy + axes[a, 2] * cz
+        if low[a] - centre > reach[a] or high[a] - centre < -reach[a]:
+            return False
+    return True
 
 
 @nb.njit(cache=True, inline="always")
@@ -254,11 +257,15 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
     unit = float(np.int64(1) << snap_bits)
     side = float(np.int64(1) << cell_bits)
     margin = 1e-7 * side
+    half = 0.5 * side + margin  # the cells are tested widened by the margin
     n = faces.shape[0]
     n_chunks = min(n, TRIANGLE_CHUNKS)
     for chunk in nb.prange(n_chunks):
         tri = np.empty((3, 3))
-        lo = np.empty(3)
+        axes = np.empty((_SAT_AXES, 3))
+        low = np.empty(_SAT_AXES)
+        high = np.empty(_SAT_AXES)
+        reach = np.empty(_SAT_AXES)
         cell = np.empty(3, dtype=np.int64)
         c0 = np.empty(3, dtype=np.int64)
         c1 = np.empty(3, dtype=np.int64)
@@ -289,6 +296,8 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
             ny = (tri[1, 2] - tri[0, 2]) * (tri[2, 0] - tri[0, 0]) - (tri[1, 0] - tri[0, 0]) * (tri[2, 2] - tri[0, 2])
             nz = (tri[1, 0] - tri[0, 0]) * (tri[2, 1] - tri[0, 1]) - (tri[1, 1] - tri[0, 1]) * (tri[2, 0] - tri[0, 0])
             normal = (nx, ny, nz)
+            if not bounding:
+                _triangle_axes(tri, half, axes, low, high, reach)
             k = 0
             if abs(ny) > abs(normal[k]):
                 k = 1
@@ -325,9 +334,8 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                         cell[a] = ca
                         cell[b] = cb
                         cell[k] = ck
-                        for i in range(3):
-                            lo[i] = cell[i] * side - margin
-                        if not triangle_meets_cube(tri, lo, side + 2 * margin):
+                        if not _cube_meets_triangle(tri, axes, low, high, reach, cell[0] * side + 0.5 * side,
+                                                    cell[1] * side + 0.5 * side, cell[2] * side + 0.5 * side, half):
                             continue
                         keys[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
                         key_faces[m] = f
