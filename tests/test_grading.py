@@ -111,6 +111,25 @@ def test_random_balanced_trees_conform_with_template_quality(seed, rule, min_ang
     assert np.isclose(q.radius_ratio, FAT_RATIO, atol=1e-9).sum() >= 6 * plain.sum()
 
 
+def test_hashed_vertex_numbering_grows_its_table_and_keeps_the_ids(monkeypatch):
+    """Leaves sharing no corner have 8 vertices each, more than the hash table's first size
+    holds at half load: it must grow (twice) mid-loop and still number as the dense index."""
+    grid = np.array(list(itertools.product(range(0, 24, 2), repeat=3)), dtype=np.int64)
+    anchors = grid[np.argsort(octant.morton_keys(grid), kind="stable")]
+    sides = np.ones(len(anchors), dtype=np.int64)
+    prefix = anchors[::7] + 1  # far corners of some leaves, numbered first
+    results = []
+    for per_leaf in (1e9, 0):
+        monkeypatch.setattr(lattice, "DENSE_SLOTS_PER_LEAF", per_leaf)
+        results.append(lattice.number_vertices(anchors, sides, prefix))
+    dense, hashed = results
+    assert len(dense.coords) == 8 * len(anchors)
+    assert np.array_equal(dense.coords[: len(prefix)], prefix)
+    for a, b in zip((dense.corner_ids, dense.coords), (hashed.corner_ids, hashed.coords)):
+        assert np.array_equal(a, b)
+    assert np.array_equal(dense.coords[dense.corner_ids], anchors[:, None, :] + lattice.CUBE_CORNERS[None, :, :])
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_dense_bricked_and_hashed_vertex_numbering_agree(monkeypatch, seed):
     anchors, sides = _random_balanced_tree(100 + seed, 5)  # leaves of side 16: bricks between their points
