@@ -108,14 +108,28 @@ def _depth_first(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_leve
     """
     out_keys = np.empty(1024, dtype=np.int64)
     out_levels = np.empty(1024, dtype=np.int8)
-    n = 0
     stack_keys = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
     stack_levels = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
     stack_keys[0] = 0
     stack_levels[0] = 0
-    top = 1
     cursor = np.zeros(1, dtype=np.int64)  # rule state: the descent visits keys in ascending order
-    while top > 0:
+    top, n = _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor,
+                      stack_keys, stack_levels, 1, out_keys, out_levels, 0)
+    while top > 0:  # the output filled up: double it and go on
+        out_keys = np.concatenate((out_keys, np.empty(n, dtype=np.int64)))
+        out_levels = np.concatenate((out_levels, np.empty(n, dtype=np.int8)))
+        top, n = _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor,
+                          stack_keys, stack_levels, top, out_keys, out_levels, n)
+    return out_keys[:n].copy(), out_levels[:n].copy()
+
+
+@nb.njit(cache=True)
+def _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor, stack_keys, stack_levels,
+             top, out_keys, out_levels, n):
+    """_depth_first's descent from the stack (top entries) until it is empty or the output
+    (n octants written) is full; returns (top, n).  Its own kernel, so that the loop never
+    reassigns the output arrays (that cost numba's reference counting and reloads in the loop)."""
+    while top > 0 and n < out_keys.shape[0]:
         top -= 1
         key = stack_keys[top]
         lev = stack_levels[top]
@@ -127,13 +141,10 @@ def _depth_first(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_leve
                 stack_levels[top] = lev + 1
                 top += 1
         elif action == _LEAF:
-            if n == out_keys.shape[0]:
-                out_keys = np.concatenate((out_keys, np.empty(n, dtype=np.int64)))
-                out_levels = np.concatenate((out_levels, np.empty(n, dtype=np.int8)))
             out_keys[n] = key
             out_levels[n] = lev
             n += 1
-    return out_keys[:n].copy(), out_levels[:n].copy()
+    return top, n
 
 
 @nb.njit(cache=True)
