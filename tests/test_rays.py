@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from paroct import rays
-from paroct.frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, fat_frame, row_basis
+from paroct.frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame, row_basis
 from paroct.lattice import leaf_tets
 from paroct.octree import octant_lattice_anchors, uniform_leaves
 
@@ -177,3 +177,16 @@ def test_crossings_are_ordered_by_row_cell_fraction_and_face():
     order = np.argsort(keys, kind="stable")
     rays._order_cells(keys, fracs, faces, order)
     assert np.array_equal(order, np.lexsort((faces, fracs, keys)))
+
+
+@pytest.mark.parametrize("n", [0, 1, 1000])
+def test_to_space_rounds_as_the_matrix_product(n):
+    """The parallel kernel gives numpy's origin + h * (u @ LATTICE_TO_SPACE.T) to the bit, for
+    integer and fractional lattice points."""
+    frame = fat_frame(np.array([-1.3, 0.2, 7.0]), np.array([2.9, 3.1, 9.5]), 0.0123)
+    rng = np.random.default_rng(n)
+    for u in (rng.integers(0, 1 << frame.levels, (n, 3)), rng.uniform(0, 1 << frame.levels, (n, 3)),
+              rng.integers(0, 1 << frame.levels, (n, 3)).astype(np.int32)):
+        want = frame.origin + frame.h * (u.astype(np.float64) @ LATTICE_TO_SPACE.T)
+        got = frame.to_space(u)
+        assert got.shape == (n, 3) and np.array_equal(got, want)
