@@ -265,3 +265,24 @@ def test_regions_and_size_function_refine_where_asked():
 def test_size_control_errors_are_one_line(kwargs, match):
     with pytest.raises(ParoctError, match=match):
         mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), size=0.1, **kwargs)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_restrict_keeps_the_selected_leaves_vertices_in_order(seed):
+    """mesher._restrict against numpy's gathers: the selected leaves' corners, renumbered in
+    the order of the old ids, and the mask of the old vertices kept."""
+    from paroct.mesher import _restrict
+
+    rng = np.random.default_rng(seed)
+    grid = np.array(list(itertools.product(range(6), repeat=3)), dtype=np.int64)
+    anchors = grid[np.argsort(octant.morton_keys(grid), kind="stable")]
+    vertices = lattice.number_vertices(anchors, np.ones(len(anchors), dtype=np.int64))
+    leaves = rng.random(len(anchors)) < 0.3
+    got, kept = _restrict(vertices, leaves)
+    want_kept = np.zeros(len(vertices.coords), dtype=bool)
+    want_kept[vertices.corner_ids[leaves].ravel()] = True
+    new_id = np.cumsum(want_kept) - 1
+    assert np.array_equal(kept, want_kept)
+    assert np.array_equal(got.coords, vertices.coords[want_kept])
+    assert np.array_equal(got.corner_ids, new_id[vertices.corner_ids[leaves]])
+    assert got.corner_ids.dtype == np.int32 and np.all(got.split_row == -1)

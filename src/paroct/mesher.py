@@ -900,12 +900,40 @@ def _spread_leaf_classes(corner_ids, split_row, split_ids, inside, n_band):
 def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices, np.ndarray]:
     """The vertices of the selected leaves (mask (L,)) of a one-level octree, renumbered in
     order, and the mask (V,) of the old vertices kept."""
-    corner_ids = vertices.corner_ids[leaves]
-    kept = np.zeros(vertices.coords.shape[0], dtype=bool)
-    kept[corner_ids.ravel()] = True
-    new_id = (np.cumsum(kept) - 1).astype(np.int32)
-    return LeafVertices(new_id[corner_ids], np.full(corner_ids.shape[0], -1, dtype=np.int64),
-                        np.zeros((0, 18), dtype=np.int32), vertices.coords[kept]), kept
+    corner_ids, coords, kept = _restricted(vertices.corner_ids, leaves, vertices.coords)
+    return LeafVertices(corner_ids, np.full(corner_ids.shape[0], -1, dtype=np.int64),
+                        np.zeros((0, 18), dtype=np.int32), coords), kept
+
+
+@nb.njit(cache=True)
+def _restricted(corner_ids, leaves, coords):
+    """_restrict's corner ids (K, 8) int32 renumbered, coordinates (W, 3) and kept mask (V,),
+    in one pass each (numpy's boolean row gathers and remaps took 1.6 ms on plate_holes)."""
+    kept = np.zeros(coords.shape[0], dtype=np.bool_)
+    n = 0
+    for i in range(leaves.shape[0]):
+        if leaves[i]:
+            n += 1
+            for c in range(8):
+                kept[corner_ids[i, c]] = True
+    new_id = np.empty(coords.shape[0], dtype=np.int32)
+    m = 0
+    for v in range(coords.shape[0]):
+        new_id[v] = m
+        m += kept[v]
+    out_coords = np.empty((m, 3), dtype=coords.dtype)
+    for v in range(coords.shape[0]):
+        if kept[v]:
+            for k in range(3):
+                out_coords[new_id[v], k] = coords[v, k]
+    out_ids = np.empty((n, 8), dtype=np.int32)
+    n = 0
+    for i in range(leaves.shape[0]):
+        if leaves[i]:
+            for c in range(8):
+                out_ids[n, c] = new_id[corner_ids[i, c]]
+            n += 1
+    return out_ids, out_coords, kept
 
 
 def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport,
