@@ -286,3 +286,17 @@ def test_restrict_keeps_the_selected_leaves_vertices_in_order(seed):
     assert np.array_equal(got.coords, vertices.coords[want_kept])
     assert np.array_equal(got.corner_ids, new_id[vertices.corner_ids[leaves]])
     assert got.corner_ids.dtype == np.int32 and np.all(got.split_row == -1)
+
+
+def test_cells_around_are_the_eight_cells_at_each_marked_point():
+    """mesher._cells_around against numpy's broadcast: the cells having a marked point as a
+    corner, of non-negative anchor, keyed at octree resolution."""
+    from paroct.mesher import _cells_around
+
+    rng = np.random.default_rng(7)
+    coords = rng.integers(0, 4, (200, 3)).astype(np.int64)
+    marked = rng.random(200) < 0.5
+    around = (coords[marked][:, None, :] - lattice.CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+    around = around[(around >= 0).all(axis=1)]
+    want = octant.morton_keys(around << 5)
+    assert np.array_equal(_cells_around(coords, marked, 5), want)
