@@ -221,7 +221,9 @@ def _number_points(table, bits, bricks, box_lo, directory, points, start, coords
 
 @nb.njit(cache=True)
 def _number_corners(table, bits, bricks, box_lo, directory, anchors, sides, start, corner_ids, coords, count):
-    """Number the corners of leaves start.. into corner_ids (L, 8), as _number_points."""
+    """Number the corners of leaves start.. into corner_ids (L, 8), as _number_points.  The
+    lookup is spelled out here and in _number_splits: an inlined helper taking the arrays
+    made this loop 1.6-2.6x slower."""
     for i in range(start, anchors.shape[0]):
         if not _has_room(table, count + 8):
             return i, count
