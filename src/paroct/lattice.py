@@ -183,11 +183,16 @@ def _overload_with_room(table, bits, count):
     if table.ndim == 1:
         return lambda table, bits, count: (table, bits)
 
-    def grow(table, bits, count):
-        while 2 * count > table.shape[0]:
-            table, bits = _rehash(table, bits)
-        return table, bits
-    return grow
+    return lambda table, bits, count: _rehash_for(table, bits, count)
+
+
+@nb.njit(cache=True)
+def _rehash_for(table, bits, count):
+    """A hash table doubled (_rehash) until it has room for count entries: (table, bits).
+    Not inlined: a loop inlined into the overload trips numba's SSA check."""
+    while 2 * count > table.shape[0]:
+        table, bits = _rehash(table, bits)
+    return table, bits
 
 
 @nb.njit(cache=True, inline="always")
