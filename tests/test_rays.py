@@ -190,3 +190,4 @@ def test_to_space_rounds_as_the_matrix_product(n):
         want = frame.origin + frame.h * (u.astype(np.float64) @ LATTICE_TO_SPACE.T)
         got = frame.to_space(u)
         assert got.shape == (n, 3) and np.array_equal(got, want)
+        assert np.array_equal(frame.to_space(u.reshape(1, -1, 3)), want.reshape(1, -1, 3))

@@ -89,12 +89,13 @@ class FatFrame:
     levels: int
 
     def to_space(self, u: np.ndarray) -> np.ndarray:
-        """Space points (N, 3) float64 of lattice points u (N, 3), any real dtype."""
+        """Space points (N, 3) float64 of lattice points u (N, 3), any real dtype (any shape
+        (..., 3): the result has u's shape)."""
         u = np.asarray(u)
-        if u.ndim != 2 or u.shape[1] != 3:
-            return self.origin + self.h * (np.asarray(u, dtype=np.float64) @ LATTICE_TO_SPACE.T)
-        u = np.ascontiguousarray(u, dtype=np.int64 if np.issubdtype(u.dtype, np.integer) else np.float64)
-        return _to_space(u, np.ascontiguousarray(self.origin, dtype=np.float64), float(self.h), LATTICE_TO_SPACE)
+        dtype = np.int64 if np.issubdtype(u.dtype, np.integer) else np.float64
+        rows = np.ascontiguousarray(u.reshape(-1, 3), dtype=dtype)
+        out = _to_space(rows, np.ascontiguousarray(self.origin, dtype=np.float64), float(self.h), LATTICE_TO_SPACE)
+        return out.reshape(u.shape)
 
     def to_lattice(self, x: np.ndarray) -> np.ndarray:
         """Lattice coordinates (N, 3) float64 of space points x (N, 3)."""
