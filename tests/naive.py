@@ -343,3 +343,29 @@ def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> n
         return np.ones(queries.shape[0], dtype=bool)
     d = np.sqrt(((queries[:, None, :] - points[None, :, :]) ** 2).sum(axis=2))
     return d.min(axis=1) > radius
+
+
+def cut_edges(tets: np.ndarray, inside: np.ndarray, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(starts, ends, directions) of the distinct tet edges whose ends differ in class, numbered
+    in order of first occurrence (tet by tet, edges (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)), each
+    from the end its vector points away from when that vector has no negative component, else
+    from its end in the tet's order swapped; direction: index in EDGE_DIRECTIONS of a unit
+    lattice edge, -1 otherwise.  A dict on the sorted pair."""
+    from paroct.frame import EDGE_DIRECTIONS
+
+    seen: dict[tuple[int, int], int] = {}
+    starts, ends, dirs = [], [], []
+    for tet in tets.tolist():
+        for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
+            p, q = tet[i], tet[j]
+            if inside[p] == inside[q] or (min(p, q), max(p, q)) in seen:
+                continue
+            seen[min(p, q), max(p, q)] = len(starts)
+            d = coords[q] - coords[p]
+            if (d < 0).any():
+                p, q, d = q, p, -d
+            hits = np.flatnonzero((EDGE_DIRECTIONS == d).all(axis=1))
+            starts.append(p)
+            ends.append(q)
+            dirs.append(int(hits[0]) if hits.size else -1)
+    return np.array(starts, dtype=np.int64), np.array(ends, dtype=np.int64), np.array(dirs, dtype=np.int64)

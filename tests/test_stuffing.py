@@ -13,12 +13,14 @@ import pytest
 
 from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
+from paroct.octant import morton_keys
 from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _signs, _star_score, _stencil_counts, _stencils,
                               _stencils_in_chunks, _warped, collect_cut_edges, mixed_tets, restuff, retarget_warps,
                               stuff, warp_targets)
 from paroct.topology import match_faces
 
+from .naive import cut_edges as naive_cut_edges
 from .naive import star_violation
 from .test_grading import _random_balanced_tree
 
@@ -302,6 +304,49 @@ def test_warped_moves_the_warped_vertices_onto_their_cut_points_and_appends_the_
     want[: x.shape[0]][targets >= 0] = cuts.points[targets[targets >= 0]]
     assert np.array_equal(points, want)
     assert np.array_equal(signs, np.where(targets >= 0, 0, np.where(inside, 1, -1)))
+
+
+def _check_cut_edges(tets, inside, coords):
+    """collect_cut_edges against the dict twin, and its table finds every edge's number."""
+    starts, ends, dirs, first, last, partner, edge = collect_cut_edges(tets, inside, coords)
+    want = naive_cut_edges(tets, inside, coords)
+    assert np.array_equal(starts, want[0]) and np.array_equal(ends, want[1]) and np.array_equal(dirs, want[2])
+    assert first.shape == (coords.shape[0] + 1,) and last.shape == (coords.shape[0],)
+    used = np.concatenate([np.arange(a, b) for a, b in zip(first[:-1], last)] + [np.zeros(0, dtype=np.int64)])
+    assert np.array_equal(np.sort(edge[used]), np.arange(starts.size))
+    for e, (p, q) in enumerate(zip(starts.tolist(), ends.tolist())):
+        a, b = min(p, q), max(p, q)
+        slots = np.flatnonzero(partner[first[a]:last[a]] == b)
+        assert slots.size == 1 and edge[first[a] + slots[0]] == e
+    return dirs
+
+
+@pytest.mark.parametrize("n_vertices, n_tets", [(1, 0), (4, 1), (3, 5), (50, 63), (50, 64), (50, 65), (70, 1000),
+                                                (2000, 3000)])
+def test_cut_edges_are_the_distinct_mixed_edges_in_order_of_first_occurrence(n_vertices, n_tets):
+    """Random tets (repeated vertices too), fewer vertices than VERTEX_RANGES and more."""
+    rng = np.random.default_rng(n_vertices + n_tets)
+    coords = rng.integers(0, 3, (n_vertices, 3))
+    inside = rng.random(n_vertices) < 0.5
+    tets = rng.integers(0, n_vertices, (n_tets, 4)).astype(np.int32)
+    _check_cut_edges(mixed_tets(tets, inside), inside, coords)
+    _check_cut_edges(tets.astype(np.int64), inside, coords)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_cut_edges_of_lattices_cut_by_a_sphere(seed):
+    """A graded octree's coarse and template edges, and a uniform block's unit edges of all
+    seven directions, each edge in several tets."""
+    k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
+    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+    assert (_check_cut_edges(mixed_tets(tets, inside), inside, coords) < 0).all()
+    anchors = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    anchors = anchors[np.argsort(morton_keys(anchors))]
+    vertices = lattice.number_vertices(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
+    inside = np.linalg.norm(coords @ LATTICE_TO_SPACE.T - 3.0 - 0.1 * seed, axis=1) < 2.2
+    dirs = _check_cut_edges(mixed_tets(tets, inside), inside, coords)
+    assert np.array_equal(np.unique(dirs), np.arange(7))
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -490,6 +490,9 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     targets[:n_band] = band.targets
     points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
     stages.done("stuff")
+    # The lattice's tets, vertices and the band's cut-edge tables are done with: freed before
+    # _finish's face matching allocates its own, they are not in the peak.
+    del vertices, coords, tets, band, keys, levels
     result = _finish(points, out_tets, inside, targets, report, stages, surface, h)
     lost = _losses(report, surface)
     advice, walls = "", None
@@ -764,6 +767,8 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     if window is not None:
         stages.done("quality")
         return None, asks
+    # As in _mesh_at: what stuffing needed is freed before _finish allocates.
+    del vertices, coords, tets, cuts, spacing, lattice_points, keys, levels, in_band, is_bad, is_needle
     return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
 
 

@@ -97,7 +97,7 @@ def collect_cut_edges(tets, inside, coords):
     for the unit lattice edges, whose ends are ordered so; direction -1 for other edges (of
     coarser lattices or transition templates).
     Edges are bucketed by their smaller end (a counting sort): vertex ids are spatially
-    coherent, so buckets of nearby tets are near each other in memory.
+    coherent, so buckets of nearby tets are near each other in memory.  last is first[1:].
     """
     m = tets.shape[0]
     n_vertices = coords.shape[0]
@@ -141,7 +141,21 @@ def collect_cut_edges(tets, inside, coords):
             ends[n] = q
             dirs[n] = _DIRECTION_OF_BITS[bits3] if _lattice_step(dx, dy, dz, 1) else -1
             n += 1
-    return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), first, last, partner, edge
+    # The buckets were sized by occurrences (each edge is in 4-6 tets): packed to the edges,
+    # the table kept through stuffing is a fifth of that.
+    packed = np.empty(n_vertices + 1, dtype=np.int64)
+    packed[0] = 0
+    for v in range(n_vertices):
+        packed[v + 1] = packed[v] + last[v] - first[v]
+    packed_partner = np.empty(n, dtype=np.int64)
+    packed_edge = np.empty(n, dtype=np.int64)
+    for v in range(n_vertices):
+        k = packed[v]
+        for s in range(first[v], last[v]):
+            packed_partner[k] = partner[s]
+            packed_edge[k] = edge[s]
+            k += 1
+    return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), packed, packed[1:], packed_partner, packed_edge
 
 
 @nb.njit(cache=True, inline="always")
