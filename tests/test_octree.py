@@ -115,6 +115,21 @@ def test_complete_from_seeds_matches_naive_splitting(seed):
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 
+@pytest.mark.parametrize("keys, levels", [
+    ([], []),  # the root alone
+    ([0], [0]),  # the root as a seed
+    ([(1 << (3 * ML)) - 1], [ML]),  # the last finest octant: no gap after it
+    ([0], [ML]),  # the first finest octant: no gap before it
+    ([c << (3 * (ML - 1)) for c in range(8)], [1] * 8),  # the root's children, no gaps
+    ([0, 0, 0], [3, 1, 2]),  # one anchor at three levels: the finest only
+])
+def test_complete_from_seeds_at_the_ends_of_the_key_range(keys, levels):
+    keys, levels = np.array(keys, dtype=np.int64), np.array(levels, dtype=np.int8)
+    got = complete_from_seeds(keys, levels)
+    want = _naive_complete(keys, levels)
+    assert tree_is_complete(*got) and np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
 @pytest.mark.parametrize("level,n", [(1, 3), (2, 40), (4, 50), (4, 3000), (6, 100), (12, 20000)])
 def test_insulation_parents_lists_every_neighbour_in_the_root(level, n):
     # Clustered parents repeat most neighbours; the table of listed keys must drop only repeats.

@@ -84,48 +84,29 @@ def octant_lattice_anchors(keys: np.ndarray, frame: FatFrame) -> np.ndarray:
 
 
 _DROP, _LEAF, _SPLIT = 0, 1, 2
-#: Rules of _depth_first (a rule number, not a function argument: numba's cache cannot
-#: reliably store kernels specialised on first-class functions).
-_MEETS_BOX, _HAS_DEEPER_SEED = 0, 1
 
 
 @nb.njit(cache=True)
-def _decide(rule, key, lev, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor):
-    if rule == _MEETS_BOX:
-        return _meets_box(key, lev, box_lo, box_hi, frame_levels, level)
-    return _has_deeper_seed(key, lev, seed_keys, seed_levels, cursor)
-
-
-@nb.njit(cache=True)
-def _depth_first(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels):
-    """Octants from a depth-first descent from the root, children in Morton order (so sorted).
-
-    The rule (_MEETS_BOX with the box arguments, _HAS_DEEPER_SEED with the seeds) says what
-    to do with each octant: _DROP it, keep it as a _LEAF, or _SPLIT it into its eight
-    children.  Octants are visited in ascending key order (a parent before its first child,
-    which has its key), which lets a rule keep a cursor into sorted data.  Returns
-    (keys (N,) int64, levels (N,) int8).
-    """
+def _depth_first(box_lo, box_hi, frame_levels, level):
+    """Octants from a depth-first descent from the root, children in Morton order (so sorted):
+    _meets_box says whether to _DROP an octant, keep it as a _LEAF or _SPLIT it into its eight
+    children.  Returns (keys (N,) int64, levels (N,) int8)."""
     out_keys = np.empty(1024, dtype=np.int64)
     out_levels = np.empty(1024, dtype=np.int8)
     stack_keys = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
     stack_levels = np.empty(8 * (MAX_LEVEL + 1), dtype=np.int64)
     stack_keys[0] = 0
     stack_levels[0] = 0
-    cursor = np.zeros(1, dtype=np.int64)  # rule state: the descent visits keys in ascending order
-    top, n = _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor,
-                      stack_keys, stack_levels, 1, out_keys, out_levels, 0)
+    top, n = _descend(box_lo, box_hi, frame_levels, level, stack_keys, stack_levels, 1, out_keys, out_levels, 0)
     while top > 0:  # the output filled up: double it and go on
         out_keys = np.concatenate((out_keys, np.empty(n, dtype=np.int64)))
         out_levels = np.concatenate((out_levels, np.empty(n, dtype=np.int8)))
-        top, n = _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor,
-                          stack_keys, stack_levels, top, out_keys, out_levels, n)
+        top, n = _descend(box_lo, box_hi, frame_levels, level, stack_keys, stack_levels, top, out_keys, out_levels, n)
     return out_keys[:n].copy(), out_levels[:n].copy()
 
 
 @nb.njit(cache=True)
-def _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor, stack_keys, stack_levels,
-             top, out_keys, out_levels, n):
+def _descend(box_lo, box_hi, frame_levels, level, stack_keys, stack_levels, top, out_keys, out_levels, n):
     """_depth_first's descent from the stack (top entries) until it is empty or the output
     (n octants written) is full; returns (top, n).  Its own kernel, so that the loop never
     reassigns the output arrays (that cost numba's reference counting and reloads in the loop)."""
@@ -133,7 +114,7 @@ def _descend(rule, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, 
         top -= 1
         key = stack_keys[top]
         lev = stack_levels[top]
-        action = _decide(rule, key, lev, box_lo, box_hi, frame_levels, level, seed_keys, seed_levels, cursor)
+        action = _meets_box(key, lev, box_lo, box_hi, frame_levels, level)
         if action == _SPLIT:
             step = 3 * (MAX_LEVEL - lev - 1)
             for c in range(7, -1, -1):
@@ -176,8 +157,7 @@ def uniform_leaves(frame: FatFrame, box_min: np.ndarray, box_max: np.ndarray, le
         raise ValueError(f"level = {level} is outside 0..{frame.levels}")
     lo = (np.asarray(box_min, dtype=np.float64) - frame.origin) / frame.h
     hi = (np.asarray(box_max, dtype=np.float64) - frame.origin) / frame.h
-    no_seeds = np.zeros(0, dtype=np.int64)
-    return _depth_first(_MEETS_BOX, lo, hi, np.int64(frame.levels), np.int64(level), no_seeds, no_seeds.astype(np.int8))
+    return _depth_first(lo, hi, np.int64(frame.levels), np.int64(level))
 
 
 #: Separating axes a triangle is tested on besides the three box axes: its normal and the
@@ -476,36 +456,106 @@ def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndar
     return (keys[:, None] | offsets[None, :]).ravel()
 
 
-@nb.njit(cache=True)
-def _has_deeper_seed(key, lev, keys, levels, cursor):
-    """_SPLIT iff a seed (sorted keys) is a strict descendant of the octant, else _LEAF.
-
-    cursor[0]: the first seed not below the keys visited so far; the octants come in ascending
-    key order, so it only moves forward (a binary search per octant cost 60 % more).  Seeds
-    inside the octant at its level or coarser have its anchor: after those, the next seed in
-    its range, if any, is a strict descendant."""
-    n = keys.shape[0]
-    i = cursor[0]
-    while i < n and keys[i] < key:
-        i += 1
-    cursor[0] = i
-    last = octant_last_key(key, lev)
-    while i < n and keys[i] <= last:
-        if levels[i] > lev:
-            return _SPLIT
-        i += 1
-    return _LEAF
-
-
 def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The coarsest complete linear octree in which every seed is a leaf or refined.
+    """The coarsest complete linear octree in which every seed is a leaf or refined (an octant
+    is split iff a seed is a strict descendant of it).
 
-    keys, levels: seed octants sorted by key (duplicates and overlaps allowed).  An octant is
-    split iff a seed is a strict descendant of it.  Returns (keys (N,) int64, levels (N,) int8).
+    keys, levels: seed octants sorted by key (duplicates and overlaps allowed, levels in any
+    order among equal keys).  Returns (keys (N,) int64, levels (N,) int8).
+    The seeds with no strict descendant among the seeds are leaves (_finest_seeds); the gaps
+    between them, as runs of finest-level keys, are cut into aligned octants greedily from
+    their start, each the largest that fits: those are the coarsest, since the parent of each
+    reaches past its gap (Sundar, Sampath & Biros 2008, CompleteRegion, finds the same octants
+    by descending from the nearest common ancestor).  Count, prefix sum, fill over chunks of
+    seeds, so the work is linear in the output and parallel.
     """
-    no_box = np.zeros(3)
-    return _depth_first(_HAS_DEEPER_SEED, no_box, no_box, np.int64(0), np.int64(0),
-                        np.asarray(keys, dtype=np.int64), np.asarray(levels, dtype=np.int8))
+    leaf_keys, leaf_levels = _finest_seeds(np.asarray(keys, dtype=np.int64), np.asarray(levels, dtype=np.int8))
+    return _fill_gaps(leaf_keys, leaf_levels)
+
+
+@nb.njit(cache=True)
+def _finest_seeds(keys, levels):
+    """The seeds (sorted keys) that have no strict descendant among them, one per key: at each
+    key the finest level, kept iff the next key lies past its last key.  (A seed anchored
+    strictly inside another is finer, so the next key decides.)"""
+    n = keys.shape[0]
+    out_keys = np.empty(n, dtype=np.int64)
+    out_levels = np.empty(n, dtype=np.int8)
+    m = 0
+    i = 0
+    while i < n:
+        lev = levels[i]
+        j = i + 1
+        while j < n and keys[j] == keys[i]:
+            lev = max(lev, levels[j])
+            j += 1
+        if j == n or keys[j] > octant_last_key(keys[i], lev):
+            out_keys[m] = keys[i]
+            out_levels[m] = lev
+            m += 1
+        i = j
+    return out_keys[:m], out_levels[:m]
+
+
+@nb.njit(cache=True, inline="always")
+def _largest_fitting(start, end):
+    """Level of the largest octant anchored at finest key ``start`` (aligned to it) whose keys
+    stay below ``end`` > start."""
+    lev = 0
+    while (start & ((np.int64(1) << (3 * (MAX_LEVEL - lev))) - 1)) != 0 or end - start < (
+            np.int64(1) << (3 * (MAX_LEVEL - lev))):
+        lev += 1
+    return lev
+
+
+@nb.njit(cache=True, inline="always")
+def _gap_start(keys, levels, i):
+    """First finest key after leaf i - 1 (0 for i = 0)."""
+    return np.int64(0) if i == 0 else octant_last_key(keys[i - 1], levels[i - 1]) + 1
+
+
+#: Chunks of leaves _fill_gaps hands to the threads.
+_GAP_CHUNKS = 64
+
+
+@nb.njit(cache=True, parallel=True)
+def _fill_gaps(keys, levels):
+    """The leaves (sorted, disjoint) and the coarsest octants filling the gaps before each and
+    after the last, in key order: (keys (N,) int64, levels (N,) int8)."""
+    n = keys.shape[0]
+    end = np.int64(1) << (3 * MAX_LEVEL)
+    n_chunks = min(n + 1, _GAP_CHUNKS)
+    offsets = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        count = 0
+        for i in range(c * (n + 1) // n_chunks, (c + 1) * (n + 1) // n_chunks):
+            at = _gap_start(keys, levels, i)
+            stop = keys[i] if i < n else end
+            while at < stop:
+                at += np.int64(1) << (3 * (MAX_LEVEL - _largest_fitting(at, stop)))
+                count += 1
+            count += i < n
+        offsets[c + 1] = count
+    for c in range(n_chunks):
+        offsets[c + 1] += offsets[c]
+    out_keys = np.empty(offsets[n_chunks], dtype=np.int64)
+    out_levels = np.empty(offsets[n_chunks], dtype=np.int8)
+    for c in nb.prange(n_chunks):
+        k = offsets[c]
+        for i in range(c * (n + 1) // n_chunks, (c + 1) * (n + 1) // n_chunks):
+            at = _gap_start(keys, levels, i)
+            stop = keys[i] if i < n else end
+            while at < stop:
+                lev = _largest_fitting(at, stop)
+                out_keys[k] = at
+                out_levels[k] = lev
+                k += 1
+                at += np.int64(1) << (3 * (MAX_LEVEL - lev))
+            if i < n:
+                out_keys[k] = keys[i]
+                out_levels[k] = levels[i]
+                k += 1
+    return out_keys, out_levels
 
 
 @nb.njit(cache=True)
