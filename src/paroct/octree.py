@@ -17,6 +17,7 @@ import numpy as np
 from .frame import FatFrame
 from .octant import (
     MAX_LEVEL,
+    ancestor_keys,
     morton_coords,
     morton_decode,
     morton_key,
@@ -626,13 +627,13 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
     keys = np.asarray(keys, dtype=np.int64)
     levels = np.asarray(levels, dtype=np.int8)
     seeds_k, seeds_l = [keys], [levels]
-    current_k, current_l = keys, levels
+    added = np.zeros(0, dtype=np.int64)  # seeds at the visited level, added by the finer one
     for level in range(int(levels.max(initial=0)), 1, -1):
-        parents = sorted_unique(_insulation_parents(sorted_unique(_parent_keys(current_k, current_l, level)), level))
-        seeds_k.append(parents)
-        seeds_l.append(np.full(parents.shape[0], level - 1, dtype=np.int8))
-        current_k = np.concatenate([current_k, parents])
-        current_l = np.concatenate([current_l, seeds_l[-1]])
+        # The octants at this level: the input's and the seeds the finer level added.
+        split = np.concatenate([_parent_keys(keys, levels, level), ancestor_keys(added, level - 1)])
+        added = sorted_unique(_insulation_parents(sorted_unique(split), level))
+        seeds_k.append(added)
+        seeds_l.append(np.full(added.shape[0], level - 1, dtype=np.int8))
     all_k = np.concatenate(seeds_k)
     all_l = np.concatenate(seeds_l)
     # complete_from_seeds needs keys sorted, levels in any order among equal keys; the seeds are
