@@ -478,7 +478,9 @@ def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarra
 def _finest_seeds(keys, levels):
     """The seeds (sorted keys) that have no strict descendant among them, one per key: at each
     key the finest level, kept iff the next key lies past its last key.  (A seed anchored
-    strictly inside another is finer, so the next key decides.)"""
+    strictly inside another is finer, so the next key decides.)  linearize's rule, for seeds
+    whose levels come in any order among equal keys (balance's stable sort by key alone), and
+    packed rather than masked."""
     n = keys.shape[0]
     out_keys = np.empty(n, dtype=np.int64)
     out_levels = np.empty(n, dtype=np.int8)
