@@ -9,7 +9,8 @@ import pytest
 
 from paroct import mesh
 from paroct.errors import ParoctError
-from paroct.surface import _shell_topology, _weld, load_surface, surface_from_arrays
+from paroct.surface import _bounding_box, _shell_topology, _weld, load_surface, surface_from_arrays
+from paroct.topology import edge_multiplicities
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 
@@ -87,8 +88,8 @@ def test_sheets_touching_at_a_vertex_are_two_shells_of_genus_zero():
     vertices, faces = _arrays(manifold3d.Manifold.cube([1.0, 1.0, 1.0]))
     pair = np.vstack([vertices, vertices + 1.0]), np.vstack([faces, faces + len(vertices)])
     welded, welded_faces, _ = _weld(*pair)
-    fans, shell = _shell_topology(welded_faces, welded.shape[0])
-    assert welded.shape[0] == 15 and fans == 16  # the shared corner: one vertex, two fans
+    *edges, fans, shell = _shell_topology(welded_faces, welded.shape[0])
+    assert edges == [0, 0, 0] and welded.shape[0] == 15 and fans == 16  # the shared corner: one vertex, two fans
     assert np.array_equal(np.unique(shell), [0, 1])
     both = surface_from_arrays(*pair)
     assert (both.components, both.genus) == (2, 0)
@@ -165,6 +166,32 @@ def _corrupt(vertices, faces, rng):
         else:
             vertices[rng.integers(vertices.shape[0])] += rng.normal(size=3) * 0.1
     return vertices, faces
+
+
+def test_edge_report_counts_edges_as_edge_multiplicities_does():
+    """_shell_topology's edge report (from the faces around each vertex) against the counting
+    sort of the edges in topology.edge_multiplicities, on corrupted surfaces."""
+    broken = 0
+    for seed in range(60):
+        rng = np.random.default_rng(seed)
+        vertices, faces = _corrupt(*_arrays(SOLIDS["frame"]() if seed % 2 else SOLIDS["sphere"]()), rng)
+        faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
+        count, forward, _ = edge_multiplicities(faces, vertices.shape[0])
+        expected = (np.sum(count == 1), np.sum(count > 2), np.sum((count == 2) & (forward != 1)))
+        boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces.astype(np.int32), vertices.shape[0])
+        assert (boundary, nonmanifold, flipped) == expected, seed
+        broken += any(expected)
+        assert (shell.shape[0] == faces.shape[0]) == (not any(expected))
+    assert broken > 20
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_bounding_box_is_numpys(seed):
+    rng = np.random.default_rng(seed)
+    vertices = rng.normal(size=(1 + 50 * seed, 3)) * 10.0 ** rng.integers(-5, 5)
+    lo, hi, largest = _bounding_box(vertices)
+    assert np.array_equal(lo, vertices.min(axis=0)) and np.array_equal(hi, vertices.max(axis=0))
+    assert largest == np.abs(vertices).max()
 
 
 def test_fuzzed_surfaces_are_never_accepted_where_manifold3d_refuses_them():

@@ -23,7 +23,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
-from .topology import edge_multiplicities, union, vertex_links
+from .topology import union, vertex_links
 
 #: Surface formats read through meshio, by file extension.
 SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply")
@@ -53,7 +53,8 @@ class Surface:
     def __post_init__(self):
         # Stages ask for the box a dozen times per mesh; a reduction over the vertices each time
         # cost small parts several per cent.
-        for name, corner in (("bbox_min", self.vertices.min(axis=0)), ("bbox_max", self.vertices.max(axis=0))):
+        lo, hi, _ = _bounding_box(np.ascontiguousarray(self.vertices, dtype=np.float64))
+        for name, corner in (("bbox_min", lo), ("bbox_max", hi)):
             corner.setflags(write=False)
             object.__setattr__(self, name, corner)
 
@@ -147,56 +148,69 @@ def _looks_like_text(start: bytes) -> bool:
     return not any(b < 9 or 13 < b < 32 for b in start)
 
 
-def _edge_report(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int]:
-    """Counts of (boundary edges, edges with more than two faces, edges whose two faces disagree in orientation)."""
-    count, forward, _ = edge_multiplicities(np.ascontiguousarray(faces, dtype=np.int64), n_vertices)
-    return int(np.sum(count == 1)), int(np.sum(count > 2)), int(np.sum((count == 2) & (forward != 1)))
-
-
 def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """Merge exactly coincident vertices (-0.0 equals 0.0), drop faces with a repeated vertex
     and the vertices no face uses.  Vertices are numbered in the order the kept faces first
-    use them, so the result depends only on the faces and their corner positions.  The flag
-    is False (and the arrays empty) if a corner has a NaN or infinite coordinate."""
-    vertices = np.ascontiguousarray(vertices + 0.0)  # -0.0 + 0.0 is +0.0: equal values, equal bits
+    use them, so the result depends only on the faces and their corner positions.  Returns
+    (vertices (V, 3) float64, faces (F, 3) int32, flag); the flag is False (and the arrays
+    empty) if a corner has a NaN or infinite coordinate."""
+    vertices = np.require(vertices, np.float64, ["C_CONTIGUOUS", "WRITEABLE"])  # one compiled kernel, not two
     return _weld_kernel(vertices, vertices.view(np.uint64), np.ascontiguousarray(faces, dtype=np.int64))
+
+
+@nb.njit(cache=True, inline="always")
+def _coordinate_bits(bits, v, i):
+    """The bits of coordinate i of vertex v, -0.0 read as +0.0 (equal values, equal bits)."""
+    b = bits[v, i]
+    return np.uint64(0) if b == np.uint64(0x8000000000000000) else b
 
 
 @nb.njit(cache=True)
 def _weld_kernel(vertices, bits, faces):
     """Open-addressing hash of the corners' bit patterns (one pass over the faces), then the
-    compaction to the kept faces' vertices."""
+    compaction to the kept faces' vertices.
+
+    The table has at least 4 slots a face: a closed surface has about F / 2 vertices, so it
+    is an eighth full, and even a soup of unshared corners (3 F) leaves a quarter free.  It
+    and the corner numbers are int32 (an STL of 2**29 triangles would be 25 GB): these
+    pages are first touched here, at a cost per page."""
     nf = faces.shape[0]
+    if 3 * nf >= np.int64(1) << 31:
+        raise ValueError("_weld numbers corners in int32: at most 2**31 / 3 faces")
     size = 16
-    while size < 6 * nf:  # load factor at most 1/2 (3 corners a face)
+    while size < 4 * nf:
         size *= 2
-    table = np.full(size, -1, dtype=np.int64)
-    first = np.empty(3 * nf, dtype=np.int64)  # the input vertex standing for each merged one
-    merged = np.empty((nf, 3), dtype=np.int64)
+    table = np.full(size, -1, dtype=np.int32)
+    first = np.empty(3 * nf, dtype=np.int32)  # the input vertex standing for each merged one
+    merged = np.empty((nf, 3), dtype=np.int32)
     m = 0
     for f in range(nf):
         for k in range(3):
             v = faces[f, k]
-            if not (np.isfinite(vertices[v, 0]) and np.isfinite(vertices[v, 1]) and np.isfinite(vertices[v, 2])):
-                return np.empty((0, 3), dtype=np.float64), np.empty((0, 3), dtype=np.int64), False
-            h = (bits[v, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (bits[v, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) \
-                ^ (bits[v, 2] * np.uint64(0x165667B19E3779F9))
+            b0 = _coordinate_bits(bits, v, 0)
+            b1 = _coordinate_bits(bits, v, 1)
+            b2 = _coordinate_bits(bits, v, 2)
+            h = (b0 * np.uint64(0x9E3779B97F4A7C15)) ^ (b1 * np.uint64(0xC2B2AE3D27D4EB4F)) \
+                ^ (b2 * np.uint64(0x165667B19E3779F9))
             slot = np.int64((h ^ (h >> np.uint64(29))) & np.uint64(size - 1))
             while True:
                 j = table[slot]
-                if j < 0:
+                if j < 0:  # a new position: the only corners whose finiteness is not known yet
+                    if not (np.isfinite(vertices[v, 0]) and np.isfinite(vertices[v, 1]) and np.isfinite(vertices[v, 2])):
+                        return np.empty((0, 3), dtype=np.float64), np.empty((0, 3), dtype=np.int32), False
                     table[slot] = m
                     first[m] = v
                     merged[f, k] = m
                     m += 1
                     break
                 u = first[j]
-                if bits[u, 0] == bits[v, 0] and bits[u, 1] == bits[v, 1] and bits[u, 2] == bits[v, 2]:
+                if _coordinate_bits(bits, u, 0) == b0 and _coordinate_bits(bits, u, 1) == b1 \
+                        and _coordinate_bits(bits, u, 2) == b2:
                     merged[f, k] = j
                     break
                 slot = (slot + 1) & (size - 1)
-    new_id = np.full(m, -1, dtype=np.int64)
-    out_faces = np.empty((nf, 3), dtype=np.int64)
+    new_id = np.full(m, -1, dtype=np.int32)
+    out_faces = np.empty((nf, 3), dtype=np.int32)
     out_vertices = np.empty((m, 3), dtype=np.float64)
     n_faces = 0
     n_vertices = 0
@@ -211,7 +225,7 @@ def _weld_kernel(vertices, bits, faces):
             if new_id[j] < 0:
                 new_id[j] = n_vertices
                 for i in range(3):  # not a row assignment: its shape check compiles numba's string formatting
-                    out_vertices[n_vertices, i] = vertices[first[j], i]
+                    out_vertices[n_vertices, i] = vertices[first[j], i] + 0.0  # -0.0 + 0.0 is +0.0
                 n_vertices += 1
             out_faces[n_faces, k] = new_id[j]
         n_faces += 1
@@ -219,36 +233,116 @@ def _weld_kernel(vertices, bits, faces):
 
 
 @nb.njit(cache=True)
-def _shell_topology(faces, n_vertices):
-    """Fans and shells of a surface whose edges each join two consistently oriented faces.
+def _bounding_box(vertices):
+    """Corners (3,) of the box of vertices (V >= 1, 3) and the largest coordinate magnitude:
+    one pass (numpy's reductions along axis 0 of an (V, 3) array stride, 30 ns a vertex)."""
+    lo = vertices[0].copy()
+    hi = vertices[0].copy()
+    for v in range(1, vertices.shape[0]):
+        for i in range(3):
+            x = vertices[v, i]
+            if x < lo[i]:
+                lo[i] = x
+            if x > hi[i]:
+                hi[i] = x
+    largest = 0.0
+    for i in range(3):
+        largest = max(largest, abs(lo[i]), abs(hi[i]))
+    return lo, hi, largest
 
-    A fan is a cycle of the faces around a vertex, joined through their edges at it (a
-    vertex where sheets touch has several); a shell is a set of faces joined through edges.
-    Returns (fans (total over vertices), shell label (F,) of every face, 0..S-1 in order of
-    first face).  With fans counted as vertices, V - E + F of each shell is 2 - 2 genus.
+
+@nb.njit(cache=True)
+def _edge_report(start, nxt):
+    """Counts of (boundary edges, edges in more than two faces, edges whose two faces run
+    them the same way) of the faces around every vertex (vertex_links' start, nxt).
+
+    Edge {a, b} is run a -> b by the faces in a's list with nxt == b, b -> a by those in b's;
+    it is counted once, at its first a -> b slot of its smaller end that runs it (or of the
+    other end, if no face runs it from the smaller)."""
+    boundary = 0
+    nonmanifold = 0
+    flipped = 0
+    for v in range(start.shape[0] - 1):
+        for s in range(start[v], start[v + 1]):
+            w = nxt[s]
+            seen_before = False
+            for t in range(start[v], s):
+                if nxt[t] == w:
+                    seen_before = True
+                    break
+            if seen_before:
+                continue
+            back = 0
+            for t in range(start[w], start[w + 1]):
+                if nxt[t] == v:
+                    back += 1
+            if w < v and back > 0:
+                continue  # counted from w
+            ahead = 0
+            for t in range(s, start[v + 1]):
+                if nxt[t] == w:
+                    ahead += 1
+            count = ahead + back
+            if count == 1:
+                boundary += 1
+            elif count > 2:
+                nonmanifold += 1
+            elif ahead != 1:
+                flipped += 1
+    return boundary, nonmanifold, flipped
+
+
+@nb.njit(cache=True)
+def _shell_topology(faces, n_vertices):
+    """Edge report, fans and shells of a surface.
+
+    Returns (boundary edges, edges in more than two faces, edges whose two faces run them the
+    same way; fans (total over vertices), shell label (F,) of every face, 0..S-1 in order of
+    first face).  The fans and shells are computed only if every edge joins two
+    consistently oriented faces (else 0 and an empty label array).  A fan is a cycle of the
+    faces around a vertex, joined through their edges at it (a vertex where sheets touch
+    has several); a shell is a set of faces joined through edges.  With fans counted as
+    vertices, V - E + F of each shell is 2 - 2 genus.
+
+    Every face holding edge {v, w} is in v's list, running it v -> w (nxt == w) or w -> v
+    (prv == w): the edges are all checked there.  Each edge of a good surface is run once
+    each way, so for every slot s of v exactly one slot has nxt == nxt[s] (s itself) and
+    exactly one, the face after s around v, has prv == nxt[s].  Any other count makes a
+    bad edge, and _edge_report counts them.
     """
     nf = faces.shape[0]
     start, face_of, nxt, prv = vertex_links(faces, n_vertices)
+    following = np.empty(3 * nf, dtype=np.int32)  # the slot of the face after s around its vertex
     parent = np.arange(nf)
-    seen = np.zeros(3 * nf, dtype=np.bool_)
-    fans = 0
     for v in range(n_vertices):
-        for s in range(start[v], start[v + 1]):
-            if seen[s]:
-                continue
-            fans += 1
-            cur = s
-            while not seen[cur]:  # face (v, p, q) is followed around v by the face (v, r, p)
-                seen[cur] = True
-                following = -1
-                for t in range(start[v], start[v + 1]):
-                    if prv[t] == nxt[cur]:
-                        following = t
-                        break
-                if following < 0:
-                    break
-                union(parent, face_of[cur], face_of[following])
-                cur = following
+        lo = start[v]
+        hi = start[v + 1]
+        for s in range(lo, hi):
+            w = nxt[s]
+            runs = 0
+            back = 0
+            after = -1
+            for t in range(lo, hi):
+                runs += nxt[t] == w
+                if prv[t] == w:
+                    back += 1
+                    after = t
+            if runs != 1 or back != 1:
+                boundary, nonmanifold, flipped = _edge_report(start, nxt)
+                return boundary, nonmanifold, flipped, 0, np.empty(0, dtype=np.int64)
+            following[s] = after
+            if v < w:  # the edge's two faces, joined once (at its smaller end)
+                union(parent, face_of[s], face_of[after])
+    fans = 0
+    for s in range(3 * nf):  # the cycles of following, a permutation of each vertex's slots
+        if following[s] < 0:
+            continue
+        fans += 1
+        cur = s
+        while following[cur] >= 0:
+            after = following[cur]
+            following[cur] = -1
+            cur = after
     label = np.empty(nf, dtype=np.int64)
     root_label = np.full(nf, -1, dtype=np.int64)
     n_shells = 0
@@ -260,7 +354,7 @@ def _shell_topology(faces, n_vertices):
             root_label[r] = n_shells
             n_shells += 1
         label[f] = root_label[r]
-    return fans, label
+    return 0, 0, 0, fans, label
 
 
 @nb.njit(cache=True)
@@ -315,11 +409,11 @@ MIN_EXTENT = 1e-100
 
 def _check_scale(vertices: np.ndarray, label: str) -> None:
     """Refuse coordinates beyond MAX_COORDINATE and parts smaller than MIN_EXTENT."""
-    largest = float(np.abs(vertices).max())
+    lo, hi, largest = _bounding_box(vertices)
     if largest > MAX_COORDINATE:
         raise ParoctError(f"{label}: a vertex coordinate reaches {largest:.3g}; paroct meshes coordinates up to "
                           f"{MAX_COORDINATE:.0e} in magnitude (volumes overflow beyond): scale the part")
-    extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
+    extent = float((hi - lo).max())
     if extent < MIN_EXTENT:
         raise ParoctError(f"{label}: the part spans only {extent:.3g} (longest side of its bounding box); paroct meshes "
                           f"parts of {MIN_EXTENT:.0e} or more (volumes underflow below): scale the part")
@@ -337,7 +431,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(f"{label}: empty surface (len(vertices) = {vertices.shape[0]}, len(faces) = {faces.shape[0]})")
     if not np.issubdtype(faces.dtype, np.integer):
         raise ParoctError(f"{label}: faces.dtype = {faces.dtype}, expected integers")
-    faces = faces.astype(np.int64)
+    faces = faces.astype(np.int64, copy=False)
     if faces.min() < 0 or faces.max() >= vertices.shape[0]:
         raise ParoctError(
             f"{label}: face indices span {faces.min()}..{faces.max()} but len(vertices) = {vertices.shape[0]}"
@@ -348,17 +442,15 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     if faces.shape[0] == 0:
         raise ParoctError(f"{label}: every triangle is degenerate (repeated vertex)")
     _check_scale(vertices, label)
-    boundary, nonmanifold, flipped = _edge_report(faces, vertices.shape[0])
+    boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
     if boundary or nonmanifold or flipped:
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
-
-    fans, shell = _shell_topology(faces, vertices.shape[0])
     n_shells = int(shell.max()) + 1
     if n_shells == 1:
         volume, area = _volume_area(vertices, faces)
         if not volume > 0:
             raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")
-        return Surface(vertices, faces.astype(np.int32), float(volume), float(area), _genus(fans, faces, 1), 1)
+        return Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1)
 
     # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
     solids, cavities = [], []
@@ -383,10 +475,10 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g})")
     out = solid.to_mesh64()
     out_vertices = np.array(out.vert_properties, dtype=np.float64)[:, :3]
-    out_faces = np.array(out.tri_verts, dtype=np.int64)
-    fans, shell = _shell_topology(out_faces, out_vertices.shape[0])
+    out_faces = np.array(out.tri_verts, dtype=np.int32)
+    *_, fans, shell = _shell_topology(out_faces, out_vertices.shape[0])
     n_shells = int(shell.max()) + 1
-    return Surface(out_vertices, out_faces.astype(np.int32), float(volume), float(solid.surface_area()),
+    return Surface(out_vertices, out_faces, float(volume), float(solid.surface_area()),
                    _genus(fans, out_faces, n_shells), n_shells)
 
 

@@ -149,8 +149,8 @@ def edge_multiplicities(faces, n_vertices):
 @nb.njit(cache=True)
 def vertex_links(faces, n_vertices):
     """The faces around every vertex, as the edges of its link: for s in start[v]..start[v+1]-1,
-    face face_of[s] is (v, nxt[s], prv[s]) in its own orientation.  Returns (start (V+1,),
-    face_of, nxt, prv (3F,)) int64, a counting sort of the corners by vertex."""
+    face face_of[s] is (v, nxt[s], prv[s]) in its own orientation.  Returns (start (V+1,) int64,
+    face_of, nxt, prv (3F,) of the faces' integer type), a counting sort of the corners by vertex."""
     nf = faces.shape[0]
     start = np.zeros(n_vertices + 1, dtype=np.int64)
     for f in range(nf):
@@ -158,9 +158,9 @@ def vertex_links(faces, n_vertices):
             start[faces[f, j] + 1] += 1
     for v in range(n_vertices):
         start[v + 1] += start[v]
-    face_of = np.empty(3 * nf, dtype=np.int64)
-    nxt = np.empty(3 * nf, dtype=np.int64)
-    prv = np.empty(3 * nf, dtype=np.int64)
+    face_of = np.empty(3 * nf, dtype=faces.dtype)
+    nxt = np.empty(3 * nf, dtype=faces.dtype)
+    prv = np.empty(3 * nf, dtype=faces.dtype)
     fill = start[:-1].copy()
     for f in range(nf):
         for j in range(3):
