@@ -285,12 +285,14 @@ def test_surface_edge_counts_match_a_dictionary_twin(seed):
     assert (topo.n_edges, topo.n_vertices, topo.bad_edges) == naive.surface_edges(faces)
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", range(6))
 def test_far_from_points_matches_all_pairs(seed):
     rng = np.random.default_rng(seed)
     points = rng.random((300, 3)) * [4.0, 1.0, 0.01]  # one thin axis: many points per cell
     queries = np.concatenate([rng.random((400, 3)) * [5.0, 1.5, 1.0] - 0.2, points[:20] + [0.1, 0, 0]])
-    radius = [0.05, 0.1, 0.3, 2.0][seed]
+    queries = np.concatenate([queries, points[20:40] + rng.normal(size=(20, 3)) * 0.001])
+    # The last two radii ask for far more cells than points: the grid is coarsened.
+    radius = [0.05, 0.1, 0.3, 2.0, 0.005, 0.0007][seed]
     assert np.array_equal(far_from_points(queries, points, radius), naive.far_from_points(queries, points, radius))
 
 

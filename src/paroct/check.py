@@ -219,7 +219,7 @@ def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.
 
 
 @nb.njit(cache=True)
-def _far_from(queries, points, origin, cell, radius, order, keys, dims):
+def _far_from(queries, points, origin, cell, radius, start, order, dims):
     r2 = radius * radius
     out = np.zeros(queries.shape[0], dtype=np.bool_)
     c = np.empty(3, dtype=np.int64)
@@ -233,8 +233,7 @@ def _far_from(queries, points, origin, cell, radius, order, keys, dims):
             if near or not (0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]):
                 continue
             key = (i * dims[1] + j) * dims[2] + k
-            s = np.searchsorted(keys, key)
-            while s < keys.shape[0] and keys[s] == key:
+            for s in range(start[key], start[key + 1]):
                 p = order[s]
                 d = 0.0
                 for a in range(3):
@@ -242,32 +241,31 @@ def _far_from(queries, points, origin, cell, radius, order, keys, dims):
                 if d <= r2:
                     near = True
                     break
-                s += 1
         out[q] = not near
     return out
 
 
 def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
     """Mask (Q,) of the query points (Q, 3) with no point of ``points`` (P, 3) within
-    ``radius`` (Euclidean, model units).  A uniform grid of cells of side at least radius
-    (at most 2**20 per axis): each query scans the points of its 27 surrounding cells, which
-    hold every point within radius."""
+    ``radius`` (Euclidean, model units).  A uniform grid of cells of side at least radius,
+    and coarser if it would have more than max(2 P, 4096) cells: each query scans the points
+    of its 27 surrounding cells, which hold every point within radius."""
     queries = np.ascontiguousarray(queries, dtype=np.float64)
     points = np.ascontiguousarray(points, dtype=np.float64)
     if not radius > 0:
         raise ValueError(f"radius = {radius}: must be positive")
     if points.shape[0] == 0:
         return np.ones(queries.shape[0], dtype=bool)
-    origin, cell, keys, dims = _grid_cells(points, float(radius))
-    order = np.argsort(keys, kind="stable")
-    return _far_from(queries, points, origin, cell, float(radius), order, keys[order], dims)
+    origin, cell, dims, start, order = _grid_cells(points, float(radius))
+    return _far_from(queries, points, origin, cell, float(radius), start, order, dims)
 
 
 @nb.njit(cache=True)
 def _grid_cells(points, radius):
-    """The grid of far_from_points: its origin (3,), cell side, each point's cell key (P,)
-    (row-major over dims) and dims (3,).  numpy's reductions along axis 0 of an (P, 3) array
-    took longer than the whole query."""
+    """The grid of far_from_points: its origin (3,), cell side, dims (3,), and the points by
+    cell (a counting sort: the points of cell key (row-major over dims) are
+    order[start[key]:start[key + 1]]).  numpy's reductions along axis 0 of an (P, 3) array
+    took longer than the whole query, and a sort of the keys longer than this."""
     lo = points[0].copy()
     hi = points[0].copy()
     for p in range(points.shape[0]):
@@ -276,15 +274,28 @@ def _grid_cells(points, radius):
             hi[a] = max(hi[a], points[p, a])
     cell = max(radius, (hi - lo).max() / 2**20)
     dims = np.empty(3, dtype=np.int64)
-    for a in range(3):
-        dims[a] = np.int64(math.floor((hi[a] - lo[a]) / cell)) + 1
+    while True:
+        for a in range(3):
+            dims[a] = np.int64(math.floor((hi[a] - lo[a]) / cell)) + 1
+        if dims[0] * dims[1] * dims[2] <= max(2 * points.shape[0], 4096):
+            break
+        cell *= 1.25
     keys = np.empty(points.shape[0], dtype=np.int64)
+    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
     for p in range(points.shape[0]):
         key = 0
         for a in range(3):
             key = key * dims[a] + min(np.int64(math.floor((points[p, a] - lo[a]) / cell)), dims[a] - 1)
         keys[p] = key
-    return lo, cell, keys, dims
+        start[key + 1] += 1
+    for key in range(start.shape[0] - 1):
+        start[key + 1] += start[key]
+    fill = start[:-1].copy()
+    order = np.empty(points.shape[0], dtype=np.int64)
+    for p in range(points.shape[0]):
+        order[fill[keys[p]]] = p
+        fill[keys[p]] += 1
+    return lo, cell, dims, start, order
 
 
 def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int = 3, seed: int = 0) -> np.ndarray:

@@ -197,6 +197,10 @@ def _column_rows(tri, r2, unit, r3a, r3b):
     return max(r3a, np.int64(np.ceil((z_lo - 1.0) / unit))), min(r3b, np.int64(np.floor((z_hi + 1.0) / unit)))
 
 
+#: Rows in a triangle's box up to which the box is _row_hits' bound on its hits.
+SMALL_BOX_ROWS = 4
+
+
 @nb.njit(cache=True, parallel=True)
 def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, counts):
     """Crossings of every triangle (vertex ids (F, 3) into coords (V, 3), row coordinates)
@@ -213,6 +217,11 @@ def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, 
         tri = np.empty((3, 3), dtype=np.int64)
         for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
             r2a, r2b, r3a, r3b, unit = _load_triangle(coords, triangles, f, tri, unit_bits)
+            if bounding and (r2b - r2a + 1) * (r3b - r3a + 1) <= SMALL_BOX_ROWS:
+                # Few rows in the projection's box (the usual case on fine tessellations): they are
+                # the bound, without the columns' spans.
+                counts[f] = (r2b - r2a + 1) * (r3b - r3a + 1) if r2a <= r2b and r3a <= r3b else 0
+                continue
             start = 0 if bounding else offsets[f]
             k = start
             for r2 in range(r2a, r2b + 1):
@@ -286,8 +295,10 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     counts = np.empty(triangles.shape[0], dtype=np.int64)
     _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, counts)
     written = written_slots(offsets, counts)
-    order = written[np.argsort(keys[written], kind="stable")]
-    # Ties break on the position in faces[face_ids], the same order as on faces (ascending ids).
+    # Not a stable sort (3-4x slower): _order_cells orders each run of equal keys by (fraction,
+    # face) and a triangle crosses a row's cell once, so the order is the same.  Ties break on
+    # the position in faces[face_ids], the same order as on faces (ascending ids).
+    order = written[np.argsort(keys[written])]
     _order_cells(keys, fracs, hit_faces, order)
     hit_faces = hit_faces[order]
     if face_ids is not None:
