@@ -5,7 +5,7 @@ import manifold3d
 import numpy as np
 import pytest
 
-from paroct import mesher, octant
+from paroct import mesher, octant, octree
 from paroct.band import FineSurfaceCells, band_cells, band_levels, merge_band_levels
 from paroct.check import check_mesh, distances_to_triangles
 from paroct.frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, fat_frame
@@ -35,6 +35,27 @@ def _random_triangles(seed, frame):
 def _cells(keys, frame, level):
     side = 1 << (frame.levels - level)
     return [tuple(int(v) // side for v in c) for c in octant.morton_decode(keys >> (3 * (ML - frame.levels)))]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_surface_cells_bitmap_and_sorted_lists_agree(seed):
+    """surface_cells marks a bitmap where it fits, else lists each triangle's cells and sorts
+    them (as face_buckets does): the same cells, for big triangles (walked column by column)
+    and small ones (their box's cells tested one by one)."""
+    rng = np.random.default_rng(seed)
+    frame = fat_frame(np.zeros(3), np.ones(3), 1 / 24)
+    bits = snap_bits(frame)
+    n_cells = 1 << frame.levels
+    big = rng.uniform(0.5, n_cells - 0.5, size=(20, 3, 3))
+    small = rng.uniform(1, n_cells - 2, size=(300, 1, 3)) + rng.uniform(-1.5, 1.5, size=(300, 3, 3))
+    snapped = np.round(np.concatenate([big, small]).reshape(-1, 3) * (1 << bits)).astype(np.int64)
+    faces = np.arange(len(snapped)).reshape(-1, 3)
+    for level in (frame.levels, frame.levels - 1, frame.levels - 2):
+        assert octree.surface_bitmap_fits(level, faces.shape[0])
+        listed, _ = octree._surface_cell_keys(snapped, faces, bits, frame.levels - level)
+        sorted_lists = octant.sorted_unique(listed) << (3 * (ML - frame.levels))
+        assert np.array_equal(surface_cells(frame, snapped, faces, bits, level), sorted_lists)
+    assert not octree.surface_bitmap_fits(1, 10**6) and not octree.surface_bitmap_fits(12, 10**6)
 
 
 @pytest.mark.parametrize("seed", range(3))

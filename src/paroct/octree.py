@@ -237,23 +237,30 @@ def _slab_span(tri, a, b, a0, a1):
 
 #: Most chunks a parallel pass over triangles is split into (each thread owns whole chunks).
 TRIANGLE_CHUNKS = 64
+#: Cells in a triangle's box up to which _surface_cell_hits tests them all.
+SMALL_BOX_CELLS = 8
 
 
 @nb.njit(cache=True, parallel=True)
-def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts):
+def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts, bitmap):
     """The cells of side 2**cell_bits lattice units that each triangle meets (Morton keys at
     lattice resolution), written from offsets[f] on with face f, counts[f] = their number.
 
     Two passes over the same loop (count, prefix sum, fill: each thread owns its triangles'
     slots).  With empty offsets, counts[f] = the cells tested for triangle f, a cheap bound:
-    the exact tests run once, in the fill."""
-    bounding = offsets.shape[0] == 0
+    the exact tests run once, in the fill.
+
+    Or, with a non-empty bitmap (one bit per cell, by Morton index of the cell coordinates),
+    one serial pass that sets the bits of the cells met and tests no cell already set (most
+    cells meet several triangles); offsets, keys, key_faces and counts are then unused."""
+    marking = bitmap.shape[0] > 0
+    bounding = offsets.shape[0] == 0 and not marking
     unit = float(np.int64(1) << snap_bits)
     side = float(np.int64(1) << cell_bits)
     margin = 1e-7 * side
     half = 0.5 * side + margin  # the cells are tested widened by the margin
     n = faces.shape[0]
-    n_chunks = min(n, TRIANGLE_CHUNKS)
+    n_chunks = 1 if marking else min(n, TRIANGLE_CHUNKS)
     for chunk in nb.prange(n_chunks):
         tri = np.empty((3, 3))
         axes = np.empty((_SAT_AXES, 3))
@@ -264,7 +271,7 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
         c0 = np.empty(3, dtype=np.int64)
         c1 = np.empty(3, dtype=np.int64)
         for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            start = 0 if bounding else offsets[f]
+            start = 0 if bounding or marking else offsets[f]
             m = start
             for k in range(3):
                 for i in range(3):
@@ -277,11 +284,15 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                 # The triangle lies inside one cell (the usual case for fine tessellations): the cell
                 # meets it, no test needed.
                 if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
+                    if marking:
+                        _set_cell_bit(bitmap, c0[0], c0[1], c0[2])
+                        continue
                     if not bounding:
                         keys[m] = morton_key(c0[0] << cell_bits, c0[1] << cell_bits, c0[2] << cell_bits)
                         key_faces[m] = f
                     m += 1
-                counts[f] = m - start
+                if not marking:
+                    counts[f] = m - start
                 continue
             # Walk the columns along the axis k where the triangle's plane is steepest: over a
             # column the plane spans a short range of k (|n_k| is the largest normal component),
@@ -290,15 +301,15 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
             ny = (tri[1, 2] - tri[0, 2]) * (tri[2, 0] - tri[0, 0]) - (tri[1, 0] - tri[0, 0]) * (tri[2, 2] - tri[0, 2])
             nz = (tri[1, 0] - tri[0, 0]) * (tri[2, 1] - tri[0, 1]) - (tri[1, 1] - tri[0, 1]) * (tri[2, 0] - tri[0, 0])
             normal = (nx, ny, nz)
-            if not bounding:
-                _triangle_axes(tri, half, axes, low, high, reach)
+            ready = False  # the axes are set up at the first cell tested (marking tests few)
             k = 0
             if abs(ny) > abs(normal[k]):
                 k = 1
             if abs(nz) > abs(normal[k]):
                 k = 2
             a, b = (k + 1) % 3, (k + 2) % 3
-            steep = abs(normal[k]) > 0.0
+            # In a box of a few cells, testing each costs less than narrowing the columns' ranges.
+            steep = abs(normal[k]) > 0.0 and (c1[0] - c0[0] + 1) * (c1[1] - c0[1] + 1) * (c1[2] - c0[2] + 1) > SMALL_BOX_CELLS
             offset = normal[0] * tri[0, 0] + normal[1] * tri[0, 1] + normal[2] * tri[0, 2]
             for ca in range(max(c0[a], 0), c1[a] + 1):
                 # Only the columns the triangle's projection meets in this slab of a (widened as
@@ -328,13 +339,22 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                         cell[a] = ca
                         cell[b] = cb
                         cell[k] = ck
+                        if marking and _cell_bit(bitmap, cell[0], cell[1], cell[2]):
+                            continue
+                        if not ready:
+                            _triangle_axes(tri, half, axes, low, high, reach)
+                            ready = True
                         if not _cube_meets_triangle(tri, axes, low, high, reach, cell[0] * side + 0.5 * side,
                                                     cell[1] * side + 0.5 * side, cell[2] * side + 0.5 * side, half):
+                            continue
+                        if marking:
+                            _set_cell_bit(bitmap, cell[0], cell[1], cell[2])
                             continue
                         keys[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
                         key_faces[m] = f
                         m += 1
-            counts[f] = m - start
+            if not marking:
+                counts[f] = m - start
 
 
 @nb.njit(cache=True)
@@ -356,14 +376,14 @@ def _surface_cell_keys(snapped: np.ndarray, faces: np.ndarray, snap_bits: int, c
     and the index into faces of the triangle that listed each."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     bounds = np.empty(faces.shape[0], dtype=np.int64)
-    none = np.empty(0, dtype=np.int64)
-    _surface_cell_hits(snapped, faces, snap_bits, cell_bits, none, none, none, bounds)
+    none, no_bitmap = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.uint64)
+    _surface_cell_hits(snapped, faces, snap_bits, cell_bits, none, none, none, bounds, no_bitmap)
     offsets = np.zeros(faces.shape[0] + 1, dtype=np.int64)
     np.cumsum(bounds, out=offsets[1:])
     keys = np.empty(int(offsets[-1]), dtype=np.int64)
     key_faces = np.empty(keys.shape[0], dtype=np.int64)
     counts = np.empty(faces.shape[0], dtype=np.int64)
-    _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts)
+    _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts, no_bitmap)
     written = written_slots(offsets, counts)
     return keys[written], key_faces[written]
 
@@ -375,8 +395,66 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     relative margin of 1e-7 of the cell side, on the side of listing more cells: an octant not
     listed contains no surface point, so all its points have one inside/outside class.
     """
-    keys, _ = _surface_cell_keys(snapped, faces, snap_bits, frame.levels - level)
-    return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    if not surface_bitmap_fits(level, faces.shape[0]):
+        keys, _ = _surface_cell_keys(snapped, faces, snap_bits, frame.levels - level)
+        return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
+    bitmap = np.zeros((1 << (3 * level)) >> 6, dtype=np.uint64)
+    none = np.empty(0, dtype=np.int64)
+    _surface_cell_hits(snapped, faces, snap_bits, frame.levels - level, none, none, none, none, bitmap)
+    return _set_bits(bitmap) << (3 * (MAX_LEVEL - level))
+
+
+#: Bits per triangle (and a floor) up to which surface_cells marks a bitmap of all the cells
+#: of its level rather than listing and sorting each triangle's cells (16 bytes a cell, 3-4
+#: cells a triangle on a lattice of the boundary size).
+BITMAP_BITS_PER_FACE = 512
+BITMAP_MIN_BITS = 1 << 21
+
+
+def surface_bitmap_fits(level: int, n_faces: int) -> bool:
+    """Whether surface_cells of ``level`` marks a bitmap of its 8**level cells."""
+    return 2 <= level and 3 * level < 62 and (1 << (3 * level)) <= max(BITMAP_MIN_BITS, BITMAP_BITS_PER_FACE * n_faces)
+
+
+@nb.njit(cache=True, inline="always")
+def _cell_bit(bitmap, x, y, z):
+    """Whether the bit of cell (x, y, z) is set; cells past the bitmap's (a bitmap of
+    8**level >= 64 bits holds exactly the cells of coordinates below 2**level) read as set,
+    so they are never tested or marked."""
+    i = morton_key(x, y, z)
+    return i >= 64 * bitmap.shape[0] or (bitmap[i >> 6] >> np.uint64(i & 63)) & np.uint64(1) != 0
+
+
+@nb.njit(cache=True, inline="always")
+def _set_cell_bit(bitmap, x, y, z):
+    i = morton_key(x, y, z)
+    if i < 64 * bitmap.shape[0]:
+        bitmap[i >> 6] |= np.uint64(1) << np.uint64(i & 63)
+
+
+@nb.njit(cache=True)
+def _set_bits(bitmap):
+    """Indices (ascending, int64) of the set bits of a bitmap (uint64 words, bit i of word w
+    is index 64 w + i)."""
+    n = 0
+    for w in range(bitmap.shape[0]):
+        word = bitmap[w]
+        while word:
+            word &= word - np.uint64(1)
+            n += 1
+    out = np.empty(n, dtype=np.int64)
+    n = 0
+    for w in range(bitmap.shape[0]):
+        word = bitmap[w]
+        for i in range(64):
+            if word == 0:
+                break
+            if word & np.uint64(1):
+                out[n] = 64 * w + i
+                n += 1
+            word >>= np.uint64(1)
+    return out
 
 
 @dataclass(frozen=True)
