@@ -38,6 +38,31 @@ def _cells(keys, frame, level):
 
 
 @pytest.mark.parametrize("seed", range(3))
+def test_band_levels_ask_the_finest_level_in_each_ring(seed):
+    """band_levels and merge_band_levels against a dict of cell -> finest level asked."""
+    rng = np.random.default_rng(seed)
+    frame = fat_frame(np.zeros(3), np.ones(3), 1 / 24)
+    coarse = frame.levels - 2
+    side, n_cells = 1 << (frame.levels - coarse), 1 << coarse
+    points = rng.uniform(-side, (1 << frame.levels) + side, size=(40, 3))  # some outside the box
+    points[:5] = points[5]  # repeats
+    asked = rng.integers(coarse, coarse + 4, size=40)
+    for ring in (0, 1, 2):
+        want = {}
+        for p, level in zip(np.floor(points / side).astype(int), asked):
+            for d in np.ndindex(*(2 * ring + 1,) * 3):
+                c = p + np.array(d) - ring
+                if np.all((c >= 0) & (c < n_cells)):
+                    key = int(octant.morton_key(*c)) << (3 * (ML - coarse))
+                    want[key] = max(want.get(key, 0), int(level))
+        got = band_levels(frame, coarse, points, asked, ring)
+        assert got.keys.tolist() == sorted(want) and got.levels.tolist() == [want[k] for k in sorted(want)]
+        halves = merge_band_levels(band_levels(frame, coarse, points[:20], asked[:20], ring),
+                                   band_levels(frame, coarse, points[20:], asked[20:], ring))
+        assert np.array_equal(halves.keys, got.keys) and np.array_equal(halves.levels, got.levels)
+
+
+@pytest.mark.parametrize("seed", range(3))
 def test_surface_cells_bitmap_and_sorted_lists_agree(seed):
     """surface_cells marks a bitmap where it fits, else lists each triangle's cells and sorts
     them (as face_buckets does): the same cells, for big triangles (walked column by column)
