@@ -2,6 +2,7 @@
 rows, and meshes of thin parts refined only near their thin places."""
 
 import manifold3d
+import numba
 import numpy as np
 import pytest
 
@@ -80,6 +81,12 @@ def test_surface_cells_bitmap_and_sorted_lists_agree(seed):
         listed, _ = octree._surface_cell_keys(snapped, faces, bits, frame.levels - level)
         sorted_lists = octant.sorted_unique(listed) << (3 * (ML - frame.levels))
         assert np.array_equal(surface_cells(frame, snapped, faces, bits, level), sorted_lists)
+        threads = numba.get_num_threads()
+        try:  # a bitmap per thread: one thread gives the same union
+            numba.set_num_threads(1)
+            assert np.array_equal(surface_cells(frame, snapped, faces, bits, level), sorted_lists)
+        finally:
+            numba.set_num_threads(threads)
     assert not octree.surface_bitmap_fits(1, 10**6) and not octree.surface_bitmap_fits(12, 10**6)
 
 

@@ -250,9 +250,10 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
     slots).  With empty offsets, counts[f] = the cells tested for triangle f, a cheap bound:
     the exact tests run once, in the fill.
 
-    Or, with a non-empty bitmap (one bit per cell, by Morton index of the cell coordinates),
-    one serial pass that sets the bits of the cells met and tests no cell already set (most
-    cells meet several triangles); offsets, keys, key_faces and counts are then unused."""
+    Or, with non-empty bitmaps (B, W) (each row one bit per cell, by Morton index of the cell
+    coordinates), one pass in B chunks of triangles, each setting the bits of the cells its
+    triangles meet in its own row and testing no cell already set there (most cells meet
+    several triangles); offsets, keys, key_faces and counts are then unused."""
     marking = bitmap.shape[0] > 0
     bounding = offsets.shape[0] == 0 and not marking
     unit = float(np.int64(1) << snap_bits)
@@ -260,8 +261,9 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
     margin = 1e-7 * side
     half = 0.5 * side + margin  # the cells are tested widened by the margin
     n = faces.shape[0]
-    n_chunks = 1 if marking else min(n, TRIANGLE_CHUNKS)
+    n_chunks = bitmap.shape[0] if marking else min(n, TRIANGLE_CHUNKS)
     for chunk in nb.prange(n_chunks):
+        bits = bitmap[min(np.int64(chunk), bitmap.shape[0] - 1)]  # this chunk's row (unused unless marking)
         tri = np.empty((3, 3))
         axes = np.empty((_SAT_AXES, 3))
         low = np.empty(_SAT_AXES)
@@ -285,7 +287,7 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                 # meets it, no test needed.
                 if c0[0] >= 0 and c0[1] >= 0 and c0[2] >= 0:
                     if marking:
-                        _set_cell_bit(bitmap, c0[0], c0[1], c0[2])
+                        _set_cell_bit(bits, c0[0], c0[1], c0[2])
                         continue
                     if not bounding:
                         keys[m] = morton_key(c0[0] << cell_bits, c0[1] << cell_bits, c0[2] << cell_bits)
@@ -339,7 +341,7 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                         cell[a] = ca
                         cell[b] = cb
                         cell[k] = ck
-                        if marking and _cell_bit(bitmap, cell[0], cell[1], cell[2]):
+                        if marking and _cell_bit(bits, cell[0], cell[1], cell[2]):
                             continue
                         if not ready:
                             _triangle_axes(tri, half, axes, low, high, reach)
@@ -348,7 +350,7 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                                                     cell[1] * side + 0.5 * side, cell[2] * side + 0.5 * side, half):
                             continue
                         if marking:
-                            _set_cell_bit(bitmap, cell[0], cell[1], cell[2])
+                            _set_cell_bit(bits, cell[0], cell[1], cell[2])
                             continue
                         keys[m] = morton_key(cell[0] << cell_bits, cell[1] << cell_bits, cell[2] << cell_bits)
                         key_faces[m] = f
@@ -376,7 +378,7 @@ def _surface_cell_keys(snapped: np.ndarray, faces: np.ndarray, snap_bits: int, c
     and the index into faces of the triangle that listed each."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     bounds = np.empty(faces.shape[0], dtype=np.int64)
-    none, no_bitmap = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.uint64)
+    none, no_bitmap = np.empty(0, dtype=np.int64), np.empty((0, 1), dtype=np.uint64)
     _surface_cell_hits(snapped, faces, snap_bits, cell_bits, none, none, none, bounds, no_bitmap)
     offsets = np.zeros(faces.shape[0] + 1, dtype=np.int64)
     np.cumsum(bounds, out=offsets[1:])
@@ -399,10 +401,11 @@ def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_
     if not surface_bitmap_fits(level, faces.shape[0]):
         keys, _ = _surface_cell_keys(snapped, faces, snap_bits, frame.levels - level)
         return sorted_unique(keys) << (3 * (MAX_LEVEL - frame.levels))
-    bitmap = np.zeros((1 << (3 * level)) >> 6, dtype=np.uint64)
+    # A row per thread (any number gives the same union).
+    bitmaps = np.zeros((max(1, min(nb.get_num_threads(), faces.shape[0])), (1 << (3 * level)) >> 6), dtype=np.uint64)
     none = np.empty(0, dtype=np.int64)
-    _surface_cell_hits(snapped, faces, snap_bits, frame.levels - level, none, none, none, none, bitmap)
-    return _set_bits(bitmap) << (3 * (MAX_LEVEL - level))
+    _surface_cell_hits(snapped, faces, snap_bits, frame.levels - level, none, none, none, none, bitmaps)
+    return _set_bits(np.bitwise_or.reduce(bitmaps, axis=0)) << (3 * (MAX_LEVEL - level))
 
 
 #: Bits per triangle (and a floor) up to which surface_cells marks a bitmap of all the cells
