@@ -112,10 +112,9 @@ def collect_cut_edges(tets, inside, coords):
         first[v + 1] += first[v]
     last = first[:-1].copy()
     partner = np.empty(first[n_vertices], dtype=np.int64)
+    # 2 n + 1 if the first tet holding edge n listed its larger end first: the edge's
+    # orientation below depends on that order for other than lattice edges.
     edge = np.empty(first[n_vertices], dtype=np.int64)
-    starts = np.empty(first[n_vertices], dtype=np.int64)
-    ends = np.empty(first[n_vertices], dtype=np.int64)
-    dirs = np.empty(first[n_vertices], dtype=np.int64)
     n = 0
     for t in range(m):
         for e in range(6):
@@ -128,8 +127,29 @@ def collect_cut_edges(tets, inside, coords):
             if _edge_slot(first, last, partner, a, b) >= 0:
                 continue
             partner[last[a]] = b
-            edge[last[a]] = n
+            edge[last[a]] = 2 * n + (1 if p > q else 0)
             last[a] += 1
+            n += 1
+    # The buckets were sized by occurrences (each edge is in 4-6 tets): packed to the edges,
+    # the table kept through stuffing is a fifth of that, and the edges' ends and directions
+    # are written from it (arrays of the edges' size, not the occurrences').
+    packed = np.empty(n_vertices + 1, dtype=np.int64)
+    packed[0] = 0
+    for v in range(n_vertices):
+        packed[v + 1] = packed[v] + last[v] - first[v]
+    packed_partner = np.empty(n, dtype=np.int64)
+    packed_edge = np.empty(n, dtype=np.int64)
+    starts = np.empty(n, dtype=np.int64)
+    ends = np.empty(n, dtype=np.int64)
+    dirs = np.empty(n, dtype=np.int64)
+    for v in range(n_vertices):
+        k = packed[v]
+        for s in range(first[v], last[v]):
+            i = edge[s] >> 1
+            packed_partner[k] = partner[s]
+            packed_edge[k] = i
+            k += 1
+            p, q = (partner[s], v) if edge[s] & 1 else (v, partner[s])
             dx = coords[q, 0] - coords[p, 0]
             dy = coords[q, 1] - coords[p, 1]
             dz = coords[q, 2] - coords[p, 2]
@@ -137,25 +157,10 @@ def collect_cut_edges(tets, inside, coords):
                 p, q = q, p
                 dx, dy, dz = -dx, -dy, -dz
             bits3 = (1 if dx > 0 else 0) | (2 if dy > 0 else 0) | (4 if dz > 0 else 0)
-            starts[n] = p
-            ends[n] = q
-            dirs[n] = _DIRECTION_OF_BITS[bits3] if _lattice_step(dx, dy, dz, 1) else -1
-            n += 1
-    # The buckets were sized by occurrences (each edge is in 4-6 tets): packed to the edges,
-    # the table kept through stuffing is a fifth of that.
-    packed = np.empty(n_vertices + 1, dtype=np.int64)
-    packed[0] = 0
-    for v in range(n_vertices):
-        packed[v + 1] = packed[v] + last[v] - first[v]
-    packed_partner = np.empty(n, dtype=np.int64)
-    packed_edge = np.empty(n, dtype=np.int64)
-    for v in range(n_vertices):
-        k = packed[v]
-        for s in range(first[v], last[v]):
-            packed_partner[k] = partner[s]
-            packed_edge[k] = edge[s]
-            k += 1
-    return starts[:n].copy(), ends[:n].copy(), dirs[:n].copy(), packed, packed[1:], packed_partner, packed_edge
+            starts[i] = p
+            ends[i] = q
+            dirs[i] = _DIRECTION_OF_BITS[bits3] if _lattice_step(dx, dy, dz, 1) else -1
+    return starts, ends, dirs, packed, packed[1:], packed_partner, packed_edge
 
 
 @nb.njit(cache=True, inline="always")
