@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from .topology import TET_FACES as _FACES
-from .topology import _sort3, match_faces, nonmanifold_vertices
+from .topology import _sort3, match_faces, nonmanifold_vertices, touching
 
 
 @nb.njit(cache=True)
@@ -298,16 +298,6 @@ def local_repair(tets: np.ndarray, band_vertex: np.ndarray, bad: np.ndarray) -> 
     alive = np.ones(tets.shape[0], dtype=bool)
     alive[sub_ids[~sub_alive]] = False
     return alive
-
-
-@nb.njit(cache=True, parallel=True)
-def touching(tets, marked):
-    """Mask (M,) of the tets with a marked vertex (marked[tets].any(axis=1) without its (M, 4)
-    temporary)."""
-    out = np.empty(tets.shape[0], dtype=np.bool_)
-    for t in nb.prange(tets.shape[0]):
-        out[t] = marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]
-    return out
 
 
 def _faces_after_removal(faces: np.ndarray, near: np.ndarray, alive: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ import numpy as np
 
 from .frame import LATTICE_TO_SPACE
 from .quality import _COS_HI, _COS_LO, _RATIO, _degrees, _gather, _measure_block
+from .topology import touching
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
@@ -701,7 +702,7 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     np.cumsum(counts, out=old_offsets[1:])
     if old_offsets[-1] != out.shape[0]:
         raise ValueError(f"len(out) = {out.shape[0]}, but targets stuff {old_offsets[-1]} tets")
-    rows = _rows_touching(tets, new_targets != targets)
+    rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, tets[rows], signs, cuts, flat_ok)
     counts[rows] = np.diff(again_offsets)
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
@@ -732,21 +733,6 @@ def _splice(out, old_offsets, again, again_offsets, again_row, offsets, new_out,
                 kept[k + i] = -1
                 for c in range(4):
                     new_out[k + i, c] = again[again_offsets[j] + i, c]
-
-
-@nb.njit(cache=True)
-def _rows_touching(tets, marked):
-    """Indices of the rows of tets (T, 4) with a marked vertex."""
-    n = 0
-    for t in range(tets.shape[0]):
-        n += marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]
-    out = np.empty(n, dtype=np.int64)
-    n = 0
-    for t in range(tets.shape[0]):
-        if marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]:
-            out[n] = t
-            n += 1
-    return out
 
 
 @nb.njit(cache=True)
@@ -868,7 +854,7 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     vertices = np.unique(tets[owners].ravel()).astype(np.int64)
     marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
-    rows = _rows_touching(tets, marked)
+    rows = np.flatnonzero(touching(tets, marked))
     star_first, stars = _group_by_vertex(vertices, marked, tets[rows].astype(np.int64).ravel(), np.repeat(rows, 4))
     n_cuts = cuts.starts.shape[0]
     option_first, options = _group_by_vertex(vertices, marked, np.concatenate([cuts.starts, cuts.ends]),

@@ -97,6 +97,16 @@ def match_faces(tets):
     return neighbour, overloaded, same_side
 
 
+@nb.njit(cache=True, parallel=True)
+def touching(tets, marked):
+    """Mask (M,) of the tets with a marked vertex (marked[tets].any(axis=1) without its (M, 4)
+    temporary)."""
+    out = np.empty(tets.shape[0], dtype=np.bool_)
+    for t in nb.prange(tets.shape[0]):
+        out[t] = marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]
+    return out
+
+
 def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
     """Boundary triangles (B, 3), oriented outward, of tets with the given face neighbours."""
     t, k = np.nonzero(neighbour < 0)
