@@ -185,6 +185,24 @@ def test_edge_report_counts_edges_as_edge_multiplicities_does():
     assert broken > 20
 
 
+def test_fans_and_edges_of_a_surface_walked_in_many_chunks():
+    """Fan walks run in chunks of about 1024 vertices: a fine sphere (dozens of chunks) and two
+    of them sharing a vertex count every fan, and an edit in any chunk is found."""
+    vertices, faces = _arrays(manifold3d.Manifold.sphere(1.0, 400))
+    assert vertices.shape[0] > 32 * 1024
+    faces = faces.astype(np.int32)
+    assert _shell_topology(faces, vertices.shape[0])[:4] == (0, 0, 0, vertices.shape[0])
+    # Two spheres sharing their first vertex: that vertex has two fans.
+    touching = np.vstack([faces, np.where(faces == 0, 0, faces + vertices.shape[0] - 1)]).astype(np.int32)
+    *edges, fans, shell = _shell_topology(touching, 2 * vertices.shape[0] - 1)
+    assert edges == [0, 0, 0] and fans == 2 * vertices.shape[0] and np.array_equal(np.unique(shell), [0, 1])
+    rng = np.random.default_rng(0)
+    for i in rng.integers(0, faces.shape[0], size=5):
+        flipped = faces.copy()
+        flipped[i] = flipped[i, ::-1]
+        assert _shell_topology(flipped, vertices.shape[0])[:3] == (0, 0, 3)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_bounding_box_is_numpys(seed):
     rng = np.random.default_rng(seed)

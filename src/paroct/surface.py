@@ -292,6 +292,52 @@ def _edge_report(start, nxt):
     return boundary, nonmanifold, flipped
 
 
+@nb.njit(cache=True, parallel=True)
+def _fan_walks(start, nxt, prv, following, chunk_fans, chunk_bad):
+    """For the vertices of each chunk (chunk c of len(chunk_fans) even parts of the vertices):
+    following[s] for each slot s of vertex v, the slot whose face follows s around v (its prv
+    is nxt[s]), and the fans, the cycles of following; or chunk_bad[c] if a slot of the chunk
+    has other than exactly one slot of its vertex with nxt == nxt[s] (itself) and one with
+    prv == nxt[s].  Each chunk writes only its own vertices' slots."""
+    n = start.shape[0] - 1
+    n_chunks = chunk_fans.shape[0]
+    for c in nb.prange(n_chunks):
+        fans = 0
+        bad = False
+        for v in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            lo = start[v]
+            hi = start[v + 1]
+            for s in range(lo, hi):
+                w = nxt[s]
+                runs = 0
+                back = 0
+                after = -1
+                for t in range(lo, hi):
+                    runs += nxt[t] == w
+                    if prv[t] == w:
+                        back += 1
+                        after = t
+                if runs != 1 or back != 1:
+                    bad = True
+                    break
+                following[s] = after
+            if bad:
+                break
+            for s in range(lo, hi):  # count the cycles, marking visited slots by -2 - following
+                if following[s] < 0:
+                    continue
+                fans += 1
+                cur = s
+                while following[cur] >= 0:
+                    after = following[cur]
+                    following[cur] = -2 - after
+                    cur = after
+            for s in range(lo, hi):
+                following[s] = -2 - following[s]
+        chunk_fans[c] = fans
+        chunk_bad[c] = bad
+
+
 @nb.njit(cache=True)
 def _shell_topology(faces, n_vertices):
     """Edge report, fans and shells of a surface.
@@ -313,36 +359,19 @@ def _shell_topology(faces, n_vertices):
     nf = faces.shape[0]
     start, face_of, nxt, prv = vertex_links(faces, n_vertices)
     following = np.empty(3 * nf, dtype=np.int32)  # the slot of the face after s around its vertex
+    n_chunks = max(1, min(n_vertices // 1024, 64))
+    chunk_fans = np.zeros(n_chunks, dtype=np.int64)
+    chunk_bad = np.zeros(n_chunks, dtype=np.bool_)
+    _fan_walks(start, nxt, prv, following, chunk_fans, chunk_bad)
+    if chunk_bad.any():
+        boundary, nonmanifold, flipped = _edge_report(start, nxt)
+        return boundary, nonmanifold, flipped, 0, np.empty(0, dtype=np.int64)
+    fans = chunk_fans.sum()
     parent = np.arange(nf)
     for v in range(n_vertices):
-        lo = start[v]
-        hi = start[v + 1]
-        for s in range(lo, hi):
-            w = nxt[s]
-            runs = 0
-            back = 0
-            after = -1
-            for t in range(lo, hi):
-                runs += nxt[t] == w
-                if prv[t] == w:
-                    back += 1
-                    after = t
-            if runs != 1 or back != 1:
-                boundary, nonmanifold, flipped = _edge_report(start, nxt)
-                return boundary, nonmanifold, flipped, 0, np.empty(0, dtype=np.int64)
-            following[s] = after
-            if v < w:  # the edge's two faces, joined once (at its smaller end)
-                union(parent, face_of[s], face_of[after])
-    fans = 0
-    for s in range(3 * nf):  # the cycles of following, a permutation of each vertex's slots
-        if following[s] < 0:
-            continue
-        fans += 1
-        cur = s
-        while following[cur] >= 0:
-            after = following[cur]
-            following[cur] = -1
-            cur = after
+        for s in range(start[v], start[v + 1]):
+            if v < nxt[s]:  # the edge's two faces, joined once (at its smaller end)
+                union(parent, face_of[s], face_of[following[s]])
     label = np.empty(nf, dtype=np.int64)
     root_label = np.full(nf, -1, dtype=np.int64)
     n_shells = 0
