@@ -112,10 +112,13 @@ def collect_cut_edges(tets, inside, coords):
     for v in range(n_vertices):
         first[v + 1] += first[v]
     last = first[:-1].copy()
-    partner = np.empty(first[n_vertices], dtype=np.int64)
-    # 2 n + 1 if the first tet holding edge n listed its larger end first: the edge's
-    # orientation below depends on that order for other than lattice edges.
-    edge = np.empty(first[n_vertices], dtype=np.int64)
+    # The occurrence-sized buckets are int32 (half the pages to touch): vertex ids, and
+    # 2 n + 1 if the first tet holding edge n listed its larger end first (the edge's
+    # orientation below depends on that order for other than lattice edges).
+    if n_vertices >= np.int64(1) << 31 or first[n_vertices] >= np.int64(1) << 30:
+        raise ValueError("collect_cut_edges buckets hold int32: at most 2**31 vertices and 2**30 cut edge occurrences")
+    partner = np.empty(first[n_vertices], dtype=np.int32)
+    edge = np.empty(first[n_vertices], dtype=np.int32)
     n = 0
     for t in range(m):
         for e in range(6):
