@@ -1011,7 +1011,8 @@ def _faces_near_unit_edges(frame: FatFrame, buckets: FaceBuckets, coords: np.nda
     ends_used = np.zeros(coords.shape[0], dtype=bool)
     ends_used[starts[unit]] = True
     ends_used[ends[unit]] = True
-    at = coords[ends_used].astype(np.int64) << (MAX_LEVEL - frame.levels)
+    at = np.compress(ends_used, coords, axis=0)  # a boolean index of (V, 3) took 3x longer
+    at <<= MAX_LEVEL - frame.levels
     return faces_meeting_cells(buckets, ancestor_keys(morton_keys(at), buckets.level), n_faces)
 
 
@@ -1030,7 +1031,7 @@ def _along_edges(coords, starts, ends, fracs):
 def _compact(points, tets):
     """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order."""
     new_id = _used_ids(tets, points.shape[0])
-    return np.ascontiguousarray(points[new_id >= 0]), _renumber(tets, new_id)
+    return np.compress(new_id >= 0, points, axis=0), _renumber(tets, new_id)  # compress: 3x a boolean index
 
 
 @nb.njit(cache=True)
