@@ -981,9 +981,10 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
         fracs[other] = f
         report.unresolved_cuts += int(unresolved.sum())
     near = None
+    status = np.zeros(starts.shape[0], dtype=np.int8)
+    per_direction = np.bincount(dirs + 1, minlength=EDGE_DIRECTIONS.shape[0] + 1)[1:]
     for d in range(EDGE_DIRECTIONS.shape[0]):
-        sel = np.nonzero(dirs == d)[0]
-        if sel.size == 0:
+        if per_direction[d] == 0:
             continue
         if d in crossings:
             rows = crossings[d]
@@ -996,9 +997,8 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
             if near is None:
                 near = np.flatnonzero(_faces_near_unit_edges(frame, buckets, coords, starts, ends, dirs, faces.shape[0]))
             rows = rays.row_crossings(frame, snapped, faces, d, near)
-        f, unresolved = rays.edge_cut_fractions(rows, coords[starts[sel]], inside[starts[sel]])
-        fracs[sel] = f
-        report.unresolved_cuts += int(unresolved.sum())
+        rays.add_edge_cut_fractions(rows, coords, starts, inside, dirs, fracs, status)
+    report.unresolved_cuts += int(status.sum())
     return CutEdges(starts, ends, dirs, fracs, frame.to_space(_along_edges(coords, starts, ends, fracs)), tuple(table))
 
 

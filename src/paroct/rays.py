@@ -386,18 +386,21 @@ def _winding_numbers(keys, csum, basis, points, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def _edge_cuts(keys, fracs, basis, starts, start_inside, out, status):
-    """Per edge from starts[e] one step along the direction: the crossing in its cell nearest
-    the inside end, else a crossing exactly at its far end (fraction 1), else the midpoint with
-    status 1."""
+def _edge_cuts(keys, fracs, basis, points, starts, start_inside, dirs, direction, out, status):
+    """For each edge e with dirs[e] == direction, from points[starts[e]] one step along the
+    direction: out[e] = the crossing in its cell nearest the inside end, else a crossing
+    exactly at its far end (fraction 1), else the midpoint with status[e] = 1.  Other edges
+    are left alone (the caller's arrays serve every direction: no gathers, no scatter)."""
     n = keys.shape[0]
     for e in nb.prange(starts.shape[0]):
-        key = _point_key(basis, starts, e)
+        if dirs[e] != direction:
+            continue
+        key = _point_key(basis, points, starts[e])
         lo = _lower_bound(keys, key, 0, n)
         hi = _lower_bound(keys, key + 1, lo, n)  # keys are integers: key + 1 is cell t + 1
         status[e] = 0
         if hi > lo:
-            out[e] = fracs[lo] if start_inside[e] else fracs[hi - 1]
+            out[e] = fracs[lo] if start_inside[starts[e]] else fracs[hi - 1]
         elif hi < n and keys[hi] == key + 1 and fracs[hi] == 0.0:
             out[e] = 1.0
         else:
@@ -416,9 +419,19 @@ def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray, start_inside
     starts = np.ascontiguousarray(starts, dtype=np.int64)
     out = np.empty(starts.shape[0], dtype=np.float64)
     status = np.empty(starts.shape[0], dtype=np.int8)
-    _edge_cuts(crossings.keys, crossings.fracs, row_basis(crossings.direction), starts,
-               np.ascontiguousarray(start_inside, dtype=np.bool_), out, status)
+    add_edge_cut_fractions(crossings, starts, np.arange(starts.shape[0]), start_inside,
+                           np.full(starts.shape[0], crossings.direction), out, status)
     return out, status
+
+
+def add_edge_cut_fractions(crossings: RowCrossings, points: np.ndarray, starts: np.ndarray, inside: np.ndarray,
+                           dirs: np.ndarray, fracs: np.ndarray, status: np.ndarray) -> None:
+    """edge_cut_fractions of the edges e whose dirs[e] is the crossings' direction, written to
+    fracs[e] and status[e] in place: the edges start at points[starts[e]] (points (N, 3)
+    int64 lattice points, inside (N,) their classes); other edges are left alone."""
+    _edge_cuts(crossings.keys, crossings.fracs, row_basis(crossings.direction), points,
+               np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(inside, dtype=np.bool_),
+               np.ascontiguousarray(dirs, dtype=np.int64), crossings.direction, fracs, status)
 
 
 @nb.njit(cache=True, inline="always")
