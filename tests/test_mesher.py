@@ -323,6 +323,31 @@ def test_summary_reduces_tet_quality_exactly(seed):
     assert s.n_fat == int((np.abs(q.radius_ratio - fat_ratio) < 1e-9).sum())
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_dihedral_outliers_are_tet_qualitys_verdicts(seed):
+    """The cosine shortcut decides as the angles in degrees do: random tets (some inverted),
+    flat ones, and bounds set exactly at measured angles."""
+    from paroct.quality import dihedral_outliers
+
+    rng = np.random.default_rng(seed)
+    points = np.concatenate([rng.normal(size=(60, 3)), [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]])
+    tets = np.array([rng.choice(60, 4, replace=False) for _ in range(2000)] + [[60, 61, 62, 63]], dtype=np.int32)
+    flip = tet_quality(points, tets).volume < 0
+    flip[:20] = False  # some stay inverted
+    tets[flip] = tets[flip][:, [1, 0, 2, 3]]
+    q = tet_quality(points, tets)
+    assert (q.volume[20:-1] > 0).all() and (q.volume[:20] < 0).any()
+    seen = np.zeros(3, dtype=int)
+    for lo, hi, ratio in [(10.7, 164.8, 0.05), (float(q.min_dihedral[30]), float(q.max_dihedral[50]), 0.2),
+                          (1.0, 179.0, float(q.radius_ratio[90]))]:
+        outside, needle = dihedral_outliers(points, tets, lo, hi, ratio)
+        bad = (q.min_dihedral < lo) | (q.max_dihedral > hi)
+        assert np.array_equal(outside, bad) and np.array_equal(needle, ~bad & (q.radius_ratio < ratio))
+        assert outside[-1]  # the flat tet
+        seen += [outside.sum(), (~outside).sum(), needle.sum()]
+    assert seen.all()  # every verdict was given
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_match_faces_matches_a_dictionary(seed):
     from . import naive

@@ -24,7 +24,7 @@ from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_l
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, ancestor_keys, morton_key, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
 from .octree import FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells
-from .quality import summarize, tet_quality
+from .quality import dihedral_outliers, summarize
 from .repair import band_mask, remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, restuff, retarget_warps,
@@ -783,18 +783,17 @@ def _core(inside: np.ndarray, targets: np.ndarray, n_points: int) -> np.ndarray:
 
 def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Masks (M,) of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
-    included: tet_quality gives them 0 and 180 degrees), and of the others with 3r/R below
+    included: 0 and 180 degrees), and of the others with 3r/R below
     NEEDLE_RATIO.  core: _core's mask.  Tets of four core vertices are lattice tets stuffing
     copied, fat tets and transition templates (dihedral angles in [30, 135] degrees, 3r/R >=
     0.4: docs/transitions.md), so only the band's are measured (half of round_rod's 4.05 M
     tets at diag/80, the band of a thin rod)."""
     measured = np.flatnonzero(band_mask(tets, core))
-    quality = tet_quality(points, tets[measured])
+    bad, thin = dihedral_outliers(points, tets[measured], DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], NEEDLE_RATIO)
     outside = np.zeros(tets.shape[0], dtype=bool)
     needle = np.zeros(tets.shape[0], dtype=bool)
-    bad = (quality.min_dihedral < DIHEDRAL_BOUND[0]) | (quality.max_dihedral > DIHEDRAL_BOUND[1])
     outside[measured] = bad
-    needle[measured] = ~bad & (quality.radius_ratio < NEEDLE_RATIO)
+    needle[measured] = thin
     return outside, needle
 
 

@@ -132,6 +132,60 @@ def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max
                 max_dihedral[start + j] = _degrees(out[_COS_LO, j])
 
 
+@nb.njit(cache=True, inline="always")
+def _degrees_below(cosine, cos_bound, bound):
+    """_degrees(cosine) < bound, from the cosine alone unless it is within 1e-9 of
+    cos_bound = cos(bound) (acos is slow; the exact test decides near the bound)."""
+    if cosine > cos_bound + 1e-9:
+        return True
+    if cosine < cos_bound - 1e-9:
+        return False
+    return _degrees(cosine) < bound
+
+
+@nb.njit(cache=True, inline="always")
+def _degrees_above(cosine, cos_bound, bound):
+    """_degrees(cosine) > bound, as _degrees_below."""
+    if cosine < cos_bound - 1e-9:
+        return True
+    if cosine > cos_bound + 1e-9:
+        return False
+    return _degrees(cosine) > bound
+
+
+@nb.njit(cache=True, parallel=True)
+def _outliers(points, tets, n_chunks, lo, hi, min_ratio, outside, needle):
+    cos_lo = math.cos(math.radians(lo))
+    cos_hi = math.cos(math.radians(hi))
+    m = tets.shape[0]
+    for chunk in nb.prange(n_chunks):
+        corners = np.empty((12, BLOCK))
+        out = np.empty((4, BLOCK))
+        end = m * (chunk + 1) // n_chunks
+        for start in range(m * chunk // n_chunks, end, BLOCK):
+            n = _measure_tets(points, tets, start, end, corners, out)
+            for j in range(n):
+                # The smallest angle has the largest cosine; an angle above hi has a cosine below cos(hi).
+                bad = _degrees_below(out[_COS_HI, j], cos_lo, lo) or _degrees_above(out[_COS_LO, j], cos_hi, hi)
+                outside[start + j] = bad
+                needle[start + j] = not bad and out[_RATIO, j] < min_ratio
+
+
+def dihedral_outliers(points: np.ndarray, tets: np.ndarray, lo: float, hi: float,
+                      min_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Masks (M,) of the tets with a dihedral angle below lo or above hi degrees (folded and
+    flat ones included: 0 and 180 degrees, as tet_quality gives them), and of the others
+    with 3r/R below min_ratio: tet_quality's verdicts without its per-tet arrays or acos."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    tets = np.ascontiguousarray(tets)
+    m = tets.shape[0]
+    outside = np.empty(m, dtype=np.bool_)
+    needle = np.empty(m, dtype=np.bool_)
+    if m:
+        _outliers(points, tets, _chunks(m), float(lo), float(hi), float(min_ratio), outside, needle)
+    return outside, needle
+
+
 @dataclass(frozen=True)
 class TetQuality:
     """Per-tet measures, each (M,) float64: signed volume (model units cubed), 3r/R,
