@@ -366,23 +366,42 @@ def _lower_bound(keys, key, lo, hi):
     return lo
 
 
+@nb.njit(cache=True, inline="always")
+def _lower_bound_near(keys, key, hint):
+    """_lower_bound(keys, key, 0, len(keys)) by galloping from index hint (0 <= hint <= len):
+    O(log d) for an answer d places away, and the probes stay near the hint in memory."""
+    n = keys.shape[0]
+    if hint < n and keys[hint] < key:
+        lo = hint + 1  # keys[lo - 1] < key
+        step = 1
+        while lo + step - 1 < n and keys[lo + step - 1] < key:
+            lo += step
+            step *= 2
+        return _lower_bound(keys, key, lo, min(lo + step - 1, n))
+    hi = hint  # keys[hi] >= key, or hi == n
+    step = 1
+    while hi - step >= 0 and keys[hi - step] >= key:
+        hi -= step
+        step *= 2
+    return _lower_bound(keys, key, max(hi - step, 0), hi)
+
+
 @nb.njit(cache=True, parallel=True)
 def _winding_numbers(keys, csum, basis, points, out):
     """out[i] = sum of the crossing signs (prefix sums csum) on point i's row in cells before it.
 
-    One binary search finds the row; the point's cell is then found by galloping from the row's
-    start (rows hold a few crossings), so the second search costs O(log crossings in the row)."""
-    n = keys.shape[0]
-    for i in nb.prange(points.shape[0]):
-        key = _point_key(basis, points, i)
-        start = _lower_bound(keys, _row_start_key(key), 0, n)
-        step = 1
-        hi = start
-        while hi < n and keys[hi] < key:
-            hi = start + step
-            step *= 2
-        at = _lower_bound(keys, key, start + step // 4, min(hi, n))
-        out[i] = csum[at] - csum[start]
+    The row's start is found by galloping from the previous point's (points come in leaf
+    order, near in space), the point's cell by galloping from the row's start (rows hold a few
+    crossings)."""
+    m = points.shape[0]
+    n_chunks = min(m // 256 + 1, 64)
+    for chunk in nb.prange(n_chunks):
+        start = 0
+        for i in range(chunk * m // n_chunks, (chunk + 1) * m // n_chunks):
+            key = _point_key(basis, points, i)
+            start = _lower_bound_near(keys, _row_start_key(key), start)
+            at = _lower_bound_near(keys, key, start)
+            out[i] = csum[at] - csum[start]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -392,20 +411,25 @@ def _edge_cuts(keys, fracs, basis, points, starts, start_inside, dirs, direction
     exactly at its far end (fraction 1), else the midpoint with status[e] = 1.  Other edges
     are left alone (the caller's arrays serve every direction: no gathers, no scatter)."""
     n = keys.shape[0]
-    for e in nb.prange(starts.shape[0]):
-        if dirs[e] != direction:
-            continue
-        key = _point_key(basis, points, starts[e])
-        lo = _lower_bound(keys, key, 0, n)
-        hi = _lower_bound(keys, key + 1, lo, n)  # keys are integers: key + 1 is cell t + 1
-        status[e] = 0
-        if hi > lo:
-            out[e] = fracs[lo] if start_inside[starts[e]] else fracs[hi - 1]
-        elif hi < n and keys[hi] == key + 1 and fracs[hi] == 0.0:
-            out[e] = 1.0
-        else:
-            out[e] = 0.5
-            status[e] = 1
+    m = starts.shape[0]
+    n_chunks = min(m // 256 + 1, 64)
+    for chunk in nb.prange(n_chunks):
+        # Each search gallops from the last one: the edges come in leaf order, near in space.
+        lo = 0
+        for e in range(chunk * m // n_chunks, (chunk + 1) * m // n_chunks):
+            if dirs[e] != direction:
+                continue
+            key = _point_key(basis, points, starts[e])
+            lo = _lower_bound_near(keys, key, lo)
+            hi = _lower_bound_near(keys, key + 1, lo)  # keys are integers: key + 1 is cell t + 1
+            status[e] = 0
+            if hi > lo:
+                out[e] = fracs[lo] if start_inside[starts[e]] else fracs[hi - 1]
+            elif hi < n and keys[hi] == key + 1 and fracs[hi] == 0.0:
+                out[e] = 1.0
+            else:
+                out[e] = 0.5
+                status[e] = 1
 
 
 def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray, start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
