@@ -92,10 +92,32 @@ def test_ancestor_keys_match_coarsened_coordinates(seed):
 def test_sorted_lookup_matches_isin_and_index(seed):
     rng = np.random.default_rng(seed)
     keys = octant.sorted_unique(rng.integers(0, 1000, size=int(rng.integers(0, 200))))
-    values = rng.integers(-10, 1010, size=300)
-    at, found = octant.sorted_lookup(keys, values)
-    assert np.array_equal(found, np.isin(values, keys))
-    assert np.array_equal(keys[at[found]], values[found])
+    shuffled = rng.integers(-10, 1010, size=300)
+    ordered = np.sort(rng.integers(-10, 1010, size=5000))  # mostly sorted, in several chunks
+    for values in (shuffled, ordered, np.concatenate([ordered, shuffled, ordered[::-1]])):
+        at, found = octant.sorted_lookup(keys, values)
+        assert np.array_equal(found, np.isin(values, keys))
+        assert np.array_equal(keys[at[found]], values[found])
+        assert np.array_equal(at, np.minimum(np.searchsorted(keys, values), max(keys.shape[0] - 1, 0)))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_lower_bound_near_is_searchsorted_from_any_hint(seed):
+    """Galloping from a hint finds the same index as a binary search over all keys: repeats,
+    keys before, between and after all, empty arrays, hints at both ends."""
+    import numba
+
+    @numba.njit
+    def search(keys, queries, hints):
+        return np.array([octant.lower_bound_near(keys, queries[i], hints[i]) for i in range(queries.shape[0])])
+
+    rng = np.random.default_rng(seed)
+    for n in (0, 1, 2, 7, 300):
+        keys = np.sort(rng.integers(-50, 50, size=n)).astype(np.int64)
+        queries = rng.integers(-60, 60, size=400).astype(np.int64)
+        hints = rng.integers(0, n + 1, size=400)
+        hints[:2] = 0, n
+        assert np.array_equal(search(keys, queries, hints), np.searchsorted(keys, queries, side="left"))
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -192,21 +192,3 @@ def test_to_space_rounds_as_the_matrix_product(n):
         assert got.shape == (n, 3) and np.array_equal(got, want)
         assert np.array_equal(frame.to_space(u.reshape(1, -1, 3)), want.reshape(1, -1, 3))
 
-
-@pytest.mark.parametrize("seed", range(3))
-def test_lower_bound_near_is_searchsorted_from_any_hint(seed):
-    """Galloping from a hint finds the same index as a binary search over all keys: repeats,
-    keys before, between and after all, empty arrays, hints at both ends."""
-    import numba
-
-    @numba.njit
-    def search(keys, queries, hints):
-        return np.array([rays._lower_bound_near(keys, queries[i], hints[i]) for i in range(queries.shape[0])])
-
-    rng = np.random.default_rng(seed)
-    for n in (0, 1, 2, 7, 300):
-        keys = np.sort(rng.integers(-50, 50, size=n)).astype(np.int64)
-        queries = rng.integers(-60, 60, size=400).astype(np.int64)
-        hints = rng.integers(0, n + 1, size=400)
-        hints[:2] = 0, n
-        assert np.array_equal(search(keys, queries, hints), np.searchsorted(keys, queries, side="left"))

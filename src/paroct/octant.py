@@ -141,15 +141,61 @@ def ancestor_keys(keys: np.ndarray, level: int) -> np.ndarray:
     return np.asarray(keys) & ~((np.int64(1) << (3 * (MAX_LEVEL - level))) - 1)
 
 
+@nb.njit(cache=True, inline="always")
+def lower_bound(keys, key, lo, hi):
+    """First index in keys[lo:hi] (sorted) whose key is >= key, or hi."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@nb.njit(cache=True, inline="always")
+def lower_bound_near(keys, key, hint):
+    """lower_bound(keys, key, 0, len(keys)) by galloping from index hint (0 <= hint <= len):
+    O(log d) for an answer d places away, and the probes stay near the hint in memory."""
+    n = keys.shape[0]
+    if hint < n and keys[hint] < key:
+        lo = hint + 1  # keys[lo - 1] < key
+        step = 1
+        while lo + step - 1 < n and keys[lo + step - 1] < key:
+            lo += step
+            step *= 2
+        return lower_bound(keys, key, lo, min(lo + step - 1, n))
+    hi = hint  # keys[hi] >= key, or hi == n
+    step = 1
+    while hi - step >= 0 and keys[hi - step] >= key:
+        hi -= step
+        step *= 2
+    return lower_bound(keys, key, max(hi - step, 0), hi)
+
+
 def sorted_lookup(sorted_keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where each value sits in sorted_keys (1-D, ascending, distinct): (index (N,) into
-    sorted_keys, valid where found; found (N,) bool).  A binary search, not np.isin's sort of
-    both arrays."""
-    values = np.asarray(values)
-    if sorted_keys.shape[0] == 0:
-        return np.zeros(values.shape[0], dtype=np.int64), np.zeros(values.shape[0], dtype=bool)
-    at = np.minimum(np.searchsorted(sorted_keys, values), sorted_keys.shape[0] - 1)
-    return at, sorted_keys[at] == values
+    """Where each value sits in sorted_keys (1-D int64, ascending, distinct): (index (N,) into
+    sorted_keys, valid where found; found (N,) bool).  Searches gallop from the previous
+    value's place (values come mostly sorted: Morton keys of leaves), not np.isin's sort of
+    both arrays nor a binary search over all keys each."""
+    values = np.ascontiguousarray(values, dtype=np.int64)
+    at = np.zeros(values.shape[0], dtype=np.int64)
+    found = np.zeros(values.shape[0], dtype=bool)
+    if sorted_keys.shape[0]:
+        _lookup_near(np.ascontiguousarray(sorted_keys, dtype=np.int64), values, at, found)
+    return at, found
+
+
+@nb.njit(cache=True, parallel=True)
+def _lookup_near(keys, values, at, found):
+    m = values.shape[0]
+    n_chunks = min(m // 1024 + 1, 64)
+    for chunk in nb.prange(n_chunks):
+        hint = 0
+        for i in range(chunk * m // n_chunks, (chunk + 1) * m // n_chunks):
+            hint = lower_bound_near(keys, values[i], hint)
+            at[i] = min(hint, keys.shape[0] - 1)
+            found[i] = keys[at[i]] == values[i]
 
 
 def octants_in_cells(keys: np.ndarray, cells: np.ndarray, level: int) -> np.ndarray:

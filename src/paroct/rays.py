@@ -30,7 +30,7 @@ import numba as nb
 import numpy as np
 
 from .frame import FatFrame, row_basis
-from .octant import MAX_LEVEL, morton_key
+from .octant import MAX_LEVEL, lower_bound_near, morton_key
 from .octree import TRIANGLE_CHUNKS, FaceBuckets, written_slots
 
 #: Snapped coordinates, and their images under the row bases, stay below 2**(COORD_BITS + 1)
@@ -354,38 +354,6 @@ def _row_start_key(key):
     return (key >> _KEY_BITS) << _KEY_BITS
 
 
-@nb.njit(cache=True, inline="always")
-def _lower_bound(keys, key, lo, hi):
-    """First index in keys[lo:hi] (sorted) whose key is >= key, or hi."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if keys[mid] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@nb.njit(cache=True, inline="always")
-def _lower_bound_near(keys, key, hint):
-    """_lower_bound(keys, key, 0, len(keys)) by galloping from index hint (0 <= hint <= len):
-    O(log d) for an answer d places away, and the probes stay near the hint in memory."""
-    n = keys.shape[0]
-    if hint < n and keys[hint] < key:
-        lo = hint + 1  # keys[lo - 1] < key
-        step = 1
-        while lo + step - 1 < n and keys[lo + step - 1] < key:
-            lo += step
-            step *= 2
-        return _lower_bound(keys, key, lo, min(lo + step - 1, n))
-    hi = hint  # keys[hi] >= key, or hi == n
-    step = 1
-    while hi - step >= 0 and keys[hi - step] >= key:
-        hi -= step
-        step *= 2
-    return _lower_bound(keys, key, max(hi - step, 0), hi)
-
-
 @nb.njit(cache=True, parallel=True)
 def _winding_numbers(keys, csum, basis, points, out):
     """out[i] = sum of the crossing signs (prefix sums csum) on point i's row in cells before it.
@@ -399,8 +367,8 @@ def _winding_numbers(keys, csum, basis, points, out):
         start = 0
         for i in range(chunk * m // n_chunks, (chunk + 1) * m // n_chunks):
             key = _point_key(basis, points, i)
-            start = _lower_bound_near(keys, _row_start_key(key), start)
-            at = _lower_bound_near(keys, key, start)
+            start = lower_bound_near(keys, _row_start_key(key), start)
+            at = lower_bound_near(keys, key, start)
             out[i] = csum[at] - csum[start]
 
 
@@ -420,8 +388,8 @@ def _edge_cuts(keys, fracs, basis, points, starts, start_inside, dirs, direction
             if dirs[e] != direction:
                 continue
             key = _point_key(basis, points, starts[e])
-            lo = _lower_bound_near(keys, key, lo)
-            hi = _lower_bound_near(keys, key + 1, lo)  # keys are integers: key + 1 is cell t + 1
+            lo = lower_bound_near(keys, key, lo)
+            hi = lower_bound_near(keys, key + 1, lo)  # keys are integers: key + 1 is cell t + 1
             status[e] = 0
             if hi > lo:
                 out[e] = fracs[lo] if start_inside[starts[e]] else fracs[hi - 1]
