@@ -160,7 +160,8 @@ def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
     met = fine.met.get(level, np.zeros(0, dtype=np.int64))
     new = coarse_keys[~sorted_lookup(done, coarse_keys)[1]]
     if new.size:
-        found = surface_cells(frame, snapped, faces[faces_meeting_cells(buckets, new, faces.shape[0])], snap_bits, level)
+        near = np.compress(faces_meeting_cells(buckets, new, faces.shape[0]), faces, axis=0)
+        found = surface_cells(frame, snapped, near, snap_bits, level)
         found = found[octants_in_cells(found, new, buckets.level)]
         met = np.sort(np.concatenate([met, found]))
         done = np.sort(np.concatenate([done, new]))

@@ -708,7 +708,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     coords = vertices.coords
     inside = np.ones(coords.shape[0], dtype=bool)
     ids = _band_vertex_ids(vertices, in_band)
-    inside[ids] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], coords[ids]) > 0
+    inside[ids] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], np.take(coords, ids, axis=0)) > 0
     stages.done("classify")
 
     tets = graded_tets(vertices, inside)
@@ -740,7 +740,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         again = np.flatnonzero(kept < 0)
         is_bad, is_needle = is_bad[kept], is_needle[kept]
         core = _core(inside, targets, points.shape[0])
-        is_bad[again], is_needle[again] = _outside_bound(points, out_tets[again], core)
+        is_bad[again], is_needle[again] = _outside_bound(points, np.take(out_tets, again, axis=0), core)
     bad = np.flatnonzero(is_bad)
     stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
@@ -788,8 +788,9 @@ def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> tu
     copied, fat tets and transition templates (dihedral angles in [30, 135] degrees, 3r/R >=
     0.4: docs/transitions.md), so only the band's are measured (half of round_rod's 4.05 M
     tets at diag/80, the band of a thin rod)."""
-    measured = np.flatnonzero(band_mask(tets, core))
-    bad, thin = dihedral_outliers(points, tets[measured], DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], NEEDLE_RATIO)
+    measured = band_mask(tets, core)
+    bad, thin = dihedral_outliers(points, np.compress(measured, tets, axis=0),  # compress: 3x a fancy index
+                                  DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], NEEDLE_RATIO)
     outside = np.zeros(tets.shape[0], dtype=bool)
     needle = np.zeros(tets.shape[0], dtype=bool)
     outside[measured] = bad

@@ -278,7 +278,7 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     whose closed cube meets no other triangle."""
     T = row_basis(direction)
     coords = _in_row_coordinates(np.ascontiguousarray(snapped, dtype=np.int64), T)
-    triangles = np.ascontiguousarray(faces if face_ids is None else faces[face_ids], dtype=np.int64)
+    triangles = np.ascontiguousarray(faces if face_ids is None else np.take(faces, face_ids, axis=0), dtype=np.int64)
     bits = snap_bits(frame)
     # Count, prefix-sum, fill, with a cheap bound (the rows tested) as the count: the exact
     # tests run once, and the unwritten slots are dropped after.

@@ -706,7 +706,8 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     if old_offsets[-1] != out.shape[0]:
         raise ValueError(f"len(out) = {out.shape[0]}, but targets stuff {old_offsets[-1]} tets")
     rows = np.flatnonzero(touching(tets, new_targets != targets))
-    again, again_offsets = _stencils_of(points, lattice_points, coords, tets[rows], signs, cuts, flat_ok)
+    again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
+                                        flat_ok)
     counts[rows] = np.diff(again_offsets)
     offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
@@ -858,7 +859,8 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
     rows = np.flatnonzero(touching(tets, marked))
-    star_first, stars = _group_by_vertex(vertices, marked, tets[rows].astype(np.int64).ravel(), np.repeat(rows, 4))
+    star_first, stars = _group_by_vertex(vertices, marked, np.take(tets, rows, axis=0).astype(np.int64).ravel(),
+                                         np.repeat(rows, 4))
     n_cuts = cuts.starts.shape[0]
     option_first, options = _group_by_vertex(vertices, marked, np.concatenate([cuts.starts, cuts.ends]),
                                              np.tile(np.arange(n_cuts, dtype=np.int64), 2))
