@@ -805,12 +805,26 @@ def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:
 
 def _band_vertex_ids(vertices: LeafVertices, in_band: np.ndarray) -> np.ndarray:
     """Ids of the vertices of the band leaves (in_band (L,)): corners and split points."""
-    rows = vertices.split_row[in_band]
-    split = vertices.split_ids[rows[rows >= 0]].ravel()
     marked = np.zeros(vertices.coords.shape[0], dtype=bool)
-    marked[vertices.corner_ids[in_band].ravel()] = True
-    marked[split[split >= 0]] = True
-    return np.nonzero(marked)[0]
+    _mark_leaf_vertices(vertices.corner_ids, vertices.split_row, vertices.split_ids,
+                        np.ascontiguousarray(in_band, dtype=np.bool_), marked)
+    return np.flatnonzero(marked)
+
+
+@nb.njit(cache=True)
+def _mark_leaf_vertices(corner_ids, split_row, split_ids, in_band, marked):
+    """marked[v] = True for the corners and split points v of the leaves in_band (numpy's
+    boolean gathers of the (L, 8) and (C, 18) tables took 13 ms on tray_bottom)."""
+    for i in range(corner_ids.shape[0]):
+        if not in_band[i]:
+            continue
+        for c in range(8):
+            marked[corner_ids[i, c]] = True
+        r = split_row[i]
+        if r >= 0:
+            for k in range(split_ids.shape[1]):
+                if split_ids[r, k] >= 0:
+                    marked[split_ids[r, k]] = True
 
 
 @dataclass(frozen=True)
