@@ -116,22 +116,6 @@ def _degrees(cosine):
     return math.degrees(math.acos(cosine))
 
 
-@nb.njit(cache=True, parallel=True)
-def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max_dihedral):
-    m = tets.shape[0]
-    for chunk in nb.prange(n_chunks):
-        corners = np.empty((12, BLOCK))
-        out = np.empty((4, BLOCK))
-        end = m * (chunk + 1) // n_chunks
-        for start in range(m * chunk // n_chunks, end, BLOCK):
-            n = _measure_tets(points, tets, start, end, corners, out)
-            for j in range(n):
-                volume[start + j] = out[_VOL, j]
-                radius_ratio[start + j] = out[_RATIO, j]
-                min_dihedral[start + j] = _degrees(out[_COS_HI, j])
-                max_dihedral[start + j] = _degrees(out[_COS_LO, j])
-
-
 @nb.njit(cache=True, inline="always")
 def _degrees_below(cosine, cos_bound, bound):
     """_degrees(cosine) < bound, from the cosine alone unless it is within 1e-9 of
@@ -154,7 +138,12 @@ def _degrees_above(cosine, cos_bound, bound):
 
 
 @nb.njit(cache=True, parallel=True)
-def _outliers(points, tets, n_chunks, lo, hi, min_ratio, outside, needle):
+def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max_dihedral, bounds, outside, needle):
+    """Per-tet measures into volume .. max_dihedral (M,); or, with outside and needle (M,)
+    non-empty, only the verdicts on bounds = (lo, hi degrees, min 3r/R), from the cosines
+    (dihedral_outliers)."""
+    verdicts = outside.shape[0] > 0
+    lo, hi, min_ratio = bounds[0], bounds[1], bounds[2]
     cos_lo = math.cos(math.radians(lo))
     cos_hi = math.cos(math.radians(hi))
     m = tets.shape[0]
@@ -165,10 +154,16 @@ def _outliers(points, tets, n_chunks, lo, hi, min_ratio, outside, needle):
         for start in range(m * chunk // n_chunks, end, BLOCK):
             n = _measure_tets(points, tets, start, end, corners, out)
             for j in range(n):
-                # The smallest angle has the largest cosine; an angle above hi has a cosine below cos(hi).
-                bad = _degrees_below(out[_COS_HI, j], cos_lo, lo) or _degrees_above(out[_COS_LO, j], cos_hi, hi)
-                outside[start + j] = bad
-                needle[start + j] = not bad and out[_RATIO, j] < min_ratio
+                if verdicts:
+                    # The smallest angle has the largest cosine; an angle above hi, a cosine below cos(hi).
+                    bad = _degrees_below(out[_COS_HI, j], cos_lo, lo) or _degrees_above(out[_COS_LO, j], cos_hi, hi)
+                    outside[start + j] = bad
+                    needle[start + j] = not bad and out[_RATIO, j] < min_ratio
+                    continue
+                volume[start + j] = out[_VOL, j]
+                radius_ratio[start + j] = out[_RATIO, j]
+                min_dihedral[start + j] = _degrees(out[_COS_HI, j])
+                max_dihedral[start + j] = _degrees(out[_COS_LO, j])
 
 
 def dihedral_outliers(points: np.ndarray, tets: np.ndarray, lo: float, hi: float,
@@ -182,7 +177,9 @@ def dihedral_outliers(points: np.ndarray, tets: np.ndarray, lo: float, hi: float
     outside = np.empty(m, dtype=np.bool_)
     needle = np.empty(m, dtype=np.bool_)
     if m:
-        _outliers(points, tets, _chunks(m), float(lo), float(hi), float(min_ratio), outside, needle)
+        none = np.empty(0)
+        _tet_quality(points, tets, _chunks(m), none, none, none, none, np.array([lo, hi, min_ratio], dtype=np.float64),
+                     outside, needle)
     return outside, needle
 
 
@@ -206,7 +203,9 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> TetQuality:
     m = tets.shape[0]
     out = TetQuality(np.empty(m), np.empty(m), np.empty(m), np.empty(m))
     if m:
-        _tet_quality(points, tets, _chunks(m), out.volume, out.radius_ratio, out.min_dihedral, out.max_dihedral)
+        no_verdicts = np.empty(0, dtype=np.bool_)
+        _tet_quality(points, tets, _chunks(m), out.volume, out.radius_ratio, out.min_dihedral, out.max_dihedral,
+                     np.zeros(3), no_verdicts, no_verdicts)
     return out
 
 
