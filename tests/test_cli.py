@@ -259,6 +259,16 @@ def test_user_errors_are_one_line_with_exit_2(tmp_path, capsys, make_args, match
     _assert_one_line_error(*_run(capsys, *make_args(tmp_path, stl)), match)
 
 
+def test_a_surface_past_the_triangle_limit_is_one_line_with_exit_2(tmp_path, capsys, monkeypatch):
+    """The weld numbers corners in int32: more than surface.MAX_FACES triangles (lowered here:
+    a real one would be a 36 GB STL) are refused up front, not by the kernel."""
+    import paroct.surface
+
+    stl = _write_surface(tmp_path / "box.stl")
+    monkeypatch.setattr(paroct.surface, "MAX_FACES", 10)
+    _assert_one_line_error(*_run(capsys, "mesh", stl), r"len\(faces\) = 12; paroct reads surfaces of at most 10 triangles")
+
+
 def test_check_passes_a_valid_mesh_and_fails_broken_ones(tmp_path, capsys):
     points, tets = _block(3)
     write_mesh(tmp_path / "good.vtu", points, tets)

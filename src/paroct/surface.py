@@ -172,11 +172,9 @@ def _weld_kernel(vertices, bits, faces):
 
     The table has at least 4 slots a face: a closed surface has about F / 2 vertices, so it
     is an eighth full, and even a soup of unshared corners (3 F) leaves a quarter free.  It
-    and the corner numbers are int32 (an STL of 2**29 triangles would be 25 GB): these
-    pages are first touched here, at a cost per page."""
+    and the corner numbers are int32 (at most MAX_FACES faces, which surface_from_arrays
+    checks): these pages are first touched here, at a cost per page."""
     nf = faces.shape[0]
-    if 3 * nf >= np.int64(1) << 31:
-        raise ValueError("_weld numbers corners in int32: at most 2**31 / 3 faces")
     size = 16
     while size < 4 * nf:
         size *= 2
@@ -434,6 +432,9 @@ def _status_error(name: str, label: str, boundary: int = 0, nonmanifold: int = 0
 #: scale-invariant in between (tets of edge 1e-99 and 1e99 give the same mesh, scaled).
 MAX_COORDINATE = 1e100
 MIN_EXTENT = 1e-100
+#: Most triangles a surface may have: the weld numbers its corners in int32 (an STL that
+#: large would be 36 GB).
+MAX_FACES = (2**31 - 1) // 3
 
 
 def _check_scale(vertices: np.ndarray, label: str) -> None:
@@ -460,6 +461,8 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(f"{label}: empty surface (len(vertices) = {vertices.shape[0]}, len(faces) = {faces.shape[0]})")
     if not np.issubdtype(faces.dtype, np.integer):
         raise ParoctError(f"{label}: faces.dtype = {faces.dtype}, expected integers")
+    if faces.shape[0] > MAX_FACES:
+        raise ParoctError(f"{label}: len(faces) = {faces.shape[0]}; paroct reads surfaces of at most {MAX_FACES} triangles")
     faces = faces.astype(np.int64, copy=False)
     if faces.min() < 0 or faces.max() >= vertices.shape[0]:
         raise ParoctError(
