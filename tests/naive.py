@@ -250,6 +250,38 @@ def surface_edges(faces: np.ndarray) -> tuple[int, int, int]:
     return len(seen), len({int(v) for v in np.ravel(faces)}), bad
 
 
+def nonmanifold_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Mask (V,) of the vertices whose link (faces (v, p, q) as edges p -> q) is not one
+    cycle through distinct vertices, by dictionaries (see topology.nonmanifold_vertices)."""
+    links: dict = {}
+    for f in np.asarray(faces).tolist():
+        for j in range(3):
+            links.setdefault(f[j], []).append((f[(j + 1) % 3], f[(j + 2) % 3]))
+    bad = np.zeros(n_vertices, dtype=bool)
+    for v, edges in links.items():
+        after = dict(edges)
+        if len(after) != len(edges) or sorted(after) != sorted(q for _, q in edges):
+            bad[v] = True
+            continue
+        cur, steps = edges[0][0], 0
+        while True:
+            cur, steps = after[cur], steps + 1
+            if cur == edges[0][0]:
+                break
+        bad[v] = steps != len(edges)
+    return bad
+
+
+def stuffed_boundary(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Faces (F, 3) without a face neighbour (match_faces) and without a core vertex, in order
+    of tet and face (see repair.stuffed_boundary)."""
+    faces_of = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]
+    neighbour, _, _ = match_faces(tets)
+    out = [[int(tets[t, i]) for i in faces_of[k]] for t in range(len(tets)) for k in range(4)
+           if neighbour[t, k] < 0 and not core[tets[t, faces_of[k]]].any()]
+    return np.array(out, dtype=np.int64).reshape(-1, 3)
+
+
 def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
     """Alive mask (M,) of paroct.repair's worklist repair, by dictionaries.
 

@@ -55,7 +55,7 @@ def test_bundled_parts_mesh_validly_with_proven_angles(name, divisions):
     assert topo.genus == surface.genus and topo.components == surface.components
     rep = result.report
     assert rep.n_tets == result.mesh.tets.shape[0]
-    # The report's boundary comes from face matching among the shell tets only (repair.shell_tets).
+    # The report's boundary comes from matching only the faces without a core vertex (repair.stuffed_boundary).
     assert (rep.boundary_components, rep.boundary_genus, rep.boundary_manifold) == (topo.components, topo.genus, True)
     if divisions == 80:
         assert abs(rep.volume_error) < 0.01

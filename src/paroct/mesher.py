@@ -30,7 +30,7 @@ from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, restuff, retarget_warps,
                        stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
-from .topology import surface_topology
+from .topology import SurfaceTopology
 
 #: 3r/R of Todd's fat tet, 3 / sqrt(10).
 FAT_RADIUS_RATIO = 3 / np.sqrt(10)
@@ -530,10 +530,10 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     the result of a pass.  points, out_tets: stuff's output; inside, targets (V,): over the
     lattice vertices, points 0..V-1 of the stuffed mesh; size: the band's longest edge."""
     core = _core(inside, targets, points.shape[0])
-    out_tets, report.repaired_tets, faces_out = remove_pinches(out_tets, core)
+    out_tets, report.repaired_tets, faces_out, boundary = remove_pinches(out_tets, core)
     stages.done("repair")
 
-    _measure(points, out_tets, core, faces_out, report)
+    _measure(points, out_tets, core, boundary, report)
     _measure_misses(surface, points, faces_out, size, report)
     mesh = TetMesh(*_compact(points, out_tets))
     report.n_vertices = int(mesh.points.shape[0])
@@ -1073,8 +1073,8 @@ def _renumber(tets, new_id):
     return out
 
 
-def _measure(points, tets, core, faces, report: MeshReport) -> None:
-    """Quality, volume and boundary topology (faces: the boundary).  Tets with all four vertices
+def _measure(points, tets, core, topo: SurfaceTopology, report: MeshReport) -> None:
+    """Quality, volume and boundary topology (topo: the boundary's).  Tets with all four vertices
     core (unwarped inside lattice vertices) are lattice tets the boundary does not touch: their
     extreme dihedral angles are reported apart (they must stay in [30, 135] degrees)."""
     summary = summarize(points, tets, core, FAT_RADIUS_RATIO)
@@ -1087,9 +1087,6 @@ def _measure(points, tets, core, faces, report: MeshReport) -> None:
         report.interior_min_dihedral = summary.interior_min_dihedral
         report.interior_max_dihedral = summary.interior_max_dihedral
     report.mesh_volume = summary.volume
-    # remove_pinches left no non-manifold boundary vertex (it checks them all, and raises if
-    # its repair leaves one), so they are not counted again.
-    topo = surface_topology(faces, points.shape[0], bad_vertices=0)
     report.boundary_genus = topo.genus
     report.boundary_components = topo.components
     report.boundary_manifold = topo.manifold

@@ -15,7 +15,8 @@ import numba as nb
 import numpy as np
 
 from .topology import TET_FACES as _FACES
-from .topology import _sort3, match_faces, nonmanifold_vertices, touching
+from .topology import (SurfaceTopology, _sort3, match_faces, nonmanifold_of_fans, surface_topology, touching,
+                       vertex_fans)
 
 
 @nb.njit(cache=True)
@@ -185,87 +186,129 @@ def _repair(tets, bad_vertices, n_vertices, complete):
 
 
 @nb.njit(cache=True, parallel=True)
-def _non_core_at_least(tets, core, k):
-    """Mask (M,) of the tets with at least k vertices that are not core."""
+def band_mask(tets, core):
+    """Mask (M,) of the band tets (see band_tets): a vertex that is not core."""
     out = np.empty(tets.shape[0], dtype=np.bool_)
     for t in nb.prange(tets.shape[0]):
-        out[t] = ((not core[tets[t, 0]]) + (not core[tets[t, 1]]) + (not core[tets[t, 2]])
-                  + (not core[tets[t, 3]])) >= k
+        out[t] = not (core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]])
     return out
 
 
-def band_mask(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """Mask (M,) of the band tets (see band_tets): a vertex that is not core."""
-    return _non_core_at_least(tets, core, 1)
-
-
 def band_tets(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """The band: the tets (B, 4) with a vertex that is not core, in order.  core: (V,) True
-    for vertices all of whose faces are interior (unwarped inside lattice vertices: every
-    lattice face through three of them is kept by the stencils on both sides), so only band
-    tets can have boundary faces.  (A parallel mask and numpy's row gather: a serial
-    count-and-fill kernel took 0.08-0.12 s against 0.03-0.05 on angle_block's 5.8 M tets.)"""
+    """The band: the tets (B, 4) with a vertex that is not core, in order (core: see
+    stuffed_boundary), the only tets that can have boundary faces.  (A parallel mask and
+    numpy's row gather: a serial count-and-fill kernel took 0.08-0.12 s against 0.03-0.05
+    on angle_block's 5.8 M tets.)"""
     return np.compress(band_mask(tets, core), tets, axis=0)  # 6x a boolean index of (M, 4)
 
 
-def shell_tets(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """The tets (S, 4) with at least three vertices that are not core, in order: the only
-    ones that can have a boundary face (a boundary face has no core vertex), and every tet
-    sharing such a face is one of them, so face matching among them finds the boundary
-    (about 40 % of the band, a quarter of its matching time)."""
-    return np.compress(_non_core_at_least(tets, core, 3), tets, axis=0)
+#: Chunks of tets the parallel count-and-fill of surface_faces hands to the threads.
+TET_CHUNKS = 64
 
 
-def band_boundary(band: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """Boundary faces (F, 3) of a stuffed mesh, oriented outward, from its band (band_tets)
-    or its shell (shell_tets)."""
-    neighbour, _, _ = match_faces(band)
-    return _open_faces(band, neighbour, core)
+@nb.njit(cache=True, inline="always")
+def _surface_face_count(tets, core, t):
+    """Faces of tet t without a core vertex: 1 if it has one core vertex, 4 if none, else 0."""
+    n_core = core[tets[t, 0]] + core[tets[t, 1]] + core[tets[t, 2]] + core[tets[t, 3]]
+    return 4 if n_core == 0 else (1 if n_core == 1 else 0)
+
+
+@nb.njit(cache=True, parallel=True)
+def surface_faces(tets, core):
+    """The faces (C, 3) of tets without a core vertex, oriented outward, in order of tet and
+    face (TET_FACES): the only faces that can lie on the boundary of a stuffed mesh (its
+    vertices are cut points and warped vertices, on the surface).  Count per chunk, prefix
+    sum, fill: each thread writes only its chunks' rows."""
+    m = tets.shape[0]
+    n_chunks = max(min(m, TET_CHUNKS), 1)
+    starts = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        n = 0
+        for t in range(c * m // n_chunks, (c + 1) * m // n_chunks):
+            n += _surface_face_count(tets, core, t)
+        starts[c + 1] = n
+    for c in range(n_chunks):
+        starts[c + 1] += starts[c]
+    out = np.empty((starts[n_chunks], 3), dtype=tets.dtype)
+    for c in nb.prange(n_chunks):
+        n = starts[c]
+        for t in range(c * m // n_chunks, (c + 1) * m // n_chunks):
+            if _surface_face_count(tets, core, t) == 0:
+                continue
+            for k in range(4):
+                a = tets[t, _FACES[k, 0]]
+                b = tets[t, _FACES[k, 1]]
+                d = tets[t, _FACES[k, 2]]
+                if core[a] or core[b] or core[d]:
+                    continue
+                out[n, 0] = a
+                out[n, 1] = b
+                out[n, 2] = d
+                n += 1
+    return out
 
 
 @nb.njit(cache=True)
-def _open_faces(tets, neighbour, core):
-    """Faces (F, 3) without a neighbour and without a core vertex, oriented outward
-    (topology.boundary_faces, then the filter, in one pass).  A boundary face of a stuffed
-    mesh has none: its vertices are cut points and warped vertices, on the surface; the
-    faces of band or shell tets with a core vertex that find no neighbour among them are
-    shared with tets outside."""
-    n = 0
-    for t in range(tets.shape[0]):
-        for k in range(4):
-            if neighbour[t, k] < 0:
-                n += 1
-    faces = np.empty((n, 3), dtype=tets.dtype)
-    n = 0
-    for t in range(tets.shape[0]):
-        for k in range(4):
-            if neighbour[t, k] >= 0:
-                continue
-            a = tets[t, _FACES[k, 0]]
-            b = tets[t, _FACES[k, 1]]
-            c = tets[t, _FACES[k, 2]]
-            if core[a] or core[b] or core[c]:
-                continue
-            faces[n, 0] = a
-            faces[n, 1] = b
-            faces[n, 2] = c
-            n += 1
-    return faces[:n]
+def unmatched_faces(faces, n_vertices):
+    """Mask (F,) of the faces whose vertex set no other face has; of three or more with one
+    vertex set, all but the first two (the faces match_faces leaves without a neighbour).
+    Faces are bucketed by their smallest vertex (a counting sort, as in match_faces)."""
+    nf = faces.shape[0]
+    if n_vertices > (np.int64(1) << 32):
+        raise ValueError("unmatched_faces packs two vertex ids in 64 bits: at most 2**32 vertices")
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    for f in range(nf):
+        start[min(faces[f, 0], faces[f, 1], faces[f, 2]) + 1] += 1
+    for v in range(n_vertices):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    pairs = np.empty(nf, dtype=np.int64)
+    first = np.empty(nf, dtype=np.int64)
+    seen = np.empty(nf, dtype=np.int64)
+    out = np.ones(nf, dtype=np.bool_)
+    for f in range(nf):
+        a, b, c = _sort3(faces[f, 0], faces[f, 1], faces[f, 2])
+        pair = (np.int64(b) << 32) | np.int64(c)
+        s = start[a]
+        while s < fill[a] and pairs[s] != pair:
+            s += 1
+        if s == fill[a]:
+            pairs[s] = pair
+            first[s] = f
+            seen[s] = 1
+            fill[a] += 1
+            continue
+        seen[s] += 1
+        if seen[s] == 2:
+            out[first[s]] = False
+            out[f] = False
+    return out
 
 
-def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
-    """Tets (M', 4) whose boundary is a closed 2-manifold, the number of tets removed, and
-    the boundary faces (F, 3) of the result.
+def stuffed_boundary(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Boundary faces (F, 3) of a stuffed mesh, oriented outward.  core: (V,) True for
+    vertices all of whose faces are interior (unwarped inside lattice vertices: every
+    lattice face through three of them is kept by the stencils on both sides), so only
+    faces without one can be boundary faces (surface_faces), and they are matched among
+    themselves (a sixth of matching every face of the tets with three vertices not core)."""
+    faces = surface_faces(tets, core)
+    return np.compress(unmatched_faces(faces, core.shape[0]), faces, axis=0)
 
-    The band check finds the bad vertices cheaply; only if there are any is the repair run
-    (local_repair) and the boundary updated around the removed tets.  core: see band_tets;
-    vertices of removed tets leave it.
+
+def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, SurfaceTopology]:
+    """Tets (M', 4) whose boundary is a closed 2-manifold, the number of tets removed, the
+    boundary faces (F, 3) of the result and their topology.
+
+    The fans around the boundary's vertices find the bad vertices cheaply; only if there are
+    any is the repair run (local_repair) and the boundary updated around the removed tets.
+    core: see stuffed_boundary; vertices of removed tets leave it.
     """
     tets = np.ascontiguousarray(tets)
-    faces = band_boundary(shell_tets(tets, core), core)
-    bad = np.nonzero(nonmanifold_vertices(faces, core.shape[0]))[0]
+    faces = stuffed_boundary(tets, core)
+    fans = vertex_fans(faces, core.shape[0])
+    bad = np.flatnonzero(nonmanifold_of_fans(fans))
     if bad.size == 0:
-        return tets, 0, faces
+        return tets, 0, faces, surface_topology(faces, core.shape[0], fans=fans)
     band_vertex = np.zeros(core.shape[0], dtype=bool)
     band_vertex[band_tets(tets, core).ravel()] = True
     alive = local_repair(tets, band_vertex, bad)
@@ -276,9 +319,10 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int,
     around = np.nonzero(touching(tets, lost))[0]  # every face neighbour of a removed tet
     faces = _faces_after_removal(faces, tets[around], alive[around])
     tets = tets[alive]
-    if nonmanifold_vertices(faces, core.shape[0]).any():
+    topology = surface_topology(faces, core.shape[0])
+    if topology.bad_vertices:
         raise AssertionError("pinch repair left a non-manifold boundary vertex")
-    return tets, int(removed.size), faces
+    return tets, int(removed.size), faces, topology
 
 
 def local_repair(tets: np.ndarray, band_vertex: np.ndarray, bad: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
-from .topology import union, vertex_links
+from .topology import link_fans, union, vertex_links
 
 #: Surface formats read through meshio, by file extension.
 SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply")
@@ -290,54 +290,7 @@ def _edge_report(start, nxt):
     return boundary, nonmanifold, flipped
 
 
-@nb.njit(cache=True, parallel=True)
-def _fan_walks(start, nxt, prv, following, chunk_fans, chunk_bad):
-    """For the vertices of each chunk (chunk c of len(chunk_fans) even parts of the vertices):
-    following[s] for each slot s of vertex v, the slot whose face follows s around v (its prv
-    is nxt[s]), and the fans, the cycles of following; or chunk_bad[c] if a slot of the chunk
-    has other than exactly one slot of its vertex with nxt == nxt[s] (itself) and one with
-    prv == nxt[s].  Each chunk writes only its own vertices' slots."""
-    n = start.shape[0] - 1
-    n_chunks = chunk_fans.shape[0]
-    for c in nb.prange(n_chunks):
-        fans = 0
-        bad = False
-        for v in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            lo = start[v]
-            hi = start[v + 1]
-            for s in range(lo, hi):
-                w = nxt[s]
-                runs = 0
-                back = 0
-                after = -1
-                for t in range(lo, hi):
-                    runs += nxt[t] == w
-                    if prv[t] == w:
-                        back += 1
-                        after = t
-                if runs != 1 or back != 1:
-                    bad = True
-                    break
-                following[s] = after
-            if bad:
-                break
-            for s in range(lo, hi):  # count the cycles, marking visited slots by -2 - following
-                if following[s] < 0:
-                    continue
-                fans += 1
-                cur = s
-                while following[cur] >= 0:
-                    after = following[cur]
-                    following[cur] = -2 - after
-                    cur = after
-            for s in range(lo, hi):
-                following[s] = -2 - following[s]
-        chunk_fans[c] = fans
-        chunk_bad[c] = bad
-
-
-@nb.njit(cache=True)
-def _shell_topology(faces, n_vertices):
+def _shell_topology(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int, int, np.ndarray]:
     """Edge report, fans and shells of a surface.
 
     Returns (boundary edges, edges in more than two faces, edges whose two faces run them the
@@ -354,19 +307,25 @@ def _shell_topology(faces, n_vertices):
     exactly one, the face after s around v, has prv == nxt[s].  Any other count makes a
     bad edge, and _edge_report counts them.
     """
-    nf = faces.shape[0]
     start, face_of, nxt, prv = vertex_links(faces, n_vertices)
-    following = np.empty(3 * nf, dtype=np.int32)  # the slot of the face after s around its vertex
-    n_chunks = max(1, min(n_vertices // 1024, 64))
-    chunk_fans = np.zeros(n_chunks, dtype=np.int64)
-    chunk_bad = np.zeros(n_chunks, dtype=np.bool_)
-    _fan_walks(start, nxt, prv, following, chunk_fans, chunk_bad)
-    if chunk_bad.any():
-        boundary, nonmanifold, flipped = _edge_report(start, nxt)
-        return boundary, nonmanifold, flipped, 0, np.empty(0, dtype=np.int64)
-    fans = chunk_fans.sum()
+    following = np.empty(nxt.shape[0], dtype=np.int32)  # the slot of the face after s around its vertex
+    fans = np.empty(n_vertices, dtype=np.int32)
+    # A parallel kernel called from Python, not from another cached kernel: numba issue #8578
+    # (such a call segfaults when loaded from the cache).
+    link_fans(start, nxt, prv, following, fans)
+    if fans.min() < 0:
+        return (*_edge_report(start, nxt), 0, np.empty(0, dtype=np.int64))
+    return 0, 0, 0, int(fans.sum(dtype=np.int64)), _shells(start, face_of, nxt, following)
+
+
+@nb.njit(cache=True)
+def _shells(start, face_of, nxt, following):
+    """Shell label (F,) of every face of a surface whose every edge joins two consistently
+    oriented faces, 0..S-1 in order of first face: the faces joined through edges, the two
+    faces of edge {v, nxt[s]} being face_of[s] and face_of[following[s]] (link_fans)."""
+    nf = face_of.shape[0] // 3
     parent = np.arange(nf)
-    for v in range(n_vertices):
+    for v in range(start.shape[0] - 1):
         for s in range(start[v], start[v + 1]):
             if v < nxt[s]:  # the edge's two faces, joined once (at its smaller end)
                 union(parent, face_of[s], face_of[following[s]])
@@ -381,7 +340,7 @@ def _shell_topology(faces, n_vertices):
             root_label[r] = n_shells
             n_shells += 1
         label[f] = root_label[r]
-    return 0, 0, 0, fans, label
+    return label
 
 
 @nb.njit(cache=True)

@@ -182,44 +182,71 @@ def vertex_links(faces, n_vertices):
     return start, face_of, nxt, prv
 
 
-@nb.njit(cache=True)
-def nonmanifold_vertices(faces, n_vertices):
-    """Mask (V,) of surface vertices whose incident faces do not form exactly one closed fan.
+@nb.njit(cache=True, parallel=True)
+def link_fans(start, nxt, prv, following, fans):
+    """Fans around every vertex from the faces around it (vertex_links' start, nxt, prv).
 
-    The fan test walks the link of v: each face (v, p, q) is a link edge p -> q; a manifold
-    vertex has every link vertex leaving exactly once and the walk closing after all faces.
-    Vertices on an edge shared by other than two faces fail it too.
-    """
-    deg, _, nxt, prv = vertex_links(faces, n_vertices)
-    bad = np.zeros(n_vertices, dtype=np.bool_)
-    for v in range(n_vertices):
-        lo = deg[v]
-        hi = deg[v + 1]
-        n = hi - lo
-        if n == 0:
-            continue
-        # Walk the link from the first face: prv -> nxt edges must form one cycle of length n.
-        start = nxt[lo]
-        cur = start
-        steps = 0
-        ok = True
-        while True:
-            found = -1
-            for i in range(lo, hi):
-                if prv[i] == cur:
-                    if found != -1:
-                        ok = False
-                    found = i
-            if found == -1 or not ok:
-                ok = False
-                break
-            cur = nxt[found]
-            steps += 1
-            if cur == start or steps > n:
-                break
-        if not ok or steps != n or cur != start:
-            bad[v] = True
-    return bad
+    following[s]: the slot of v whose prv is nxt[s], the face after s around v.  fans[v]:
+    the number of fans at v, the cycles of following; 0 if no face has v; -1 if nxt[s] is
+    the prv of other than exactly one slot of v for some slot s, or following is not a
+    permutation of v's slots (two slots with one nxt).  So v passes if and only if every
+    nxt of its slots is the nxt of exactly one and the prv of exactly one: every edge {v, w}
+    in exactly two faces that run it opposite ways passes at both ends, and any other edge
+    fails at one.  Vertices run in parallel chunks, each writing only its own slots."""
+    n = start.shape[0] - 1
+    n_chunks = max(1, min(n // 1024, 64))
+    for c in nb.prange(n_chunks):
+        for v in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            lo = start[v]
+            hi = start[v + 1]
+            bad = False
+            for s in range(lo, hi):
+                w = nxt[s]
+                back = 0
+                after = -1
+                for t in range(lo, hi):
+                    if prv[t] == w:
+                        back += 1
+                        after = t
+                bad |= back != 1
+                following[s] = after
+            if bad:
+                fans[v] = -1
+                continue
+            count = 0
+            for s in range(lo, hi):  # walk the cycles, marking visited slots by -2 - following
+                if following[s] < 0:
+                    continue
+                count += 1
+                cur = s
+                while following[cur] >= 0:
+                    after = following[cur]
+                    following[cur] = -2 - after
+                    cur = after
+                bad |= cur != s  # a walk that ends elsewhere met a slot with two predecessors
+            for s in range(lo, hi):
+                following[s] = -2 - following[s]
+            fans[v] = -1 if bad else count
+
+
+def vertex_fans(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Fans (V,) int32 around every vertex of triangles (F, 3): see link_fans."""
+    start, _, nxt, prv = vertex_links(faces, n_vertices)
+    fans = np.empty(n_vertices, dtype=np.int32)
+    link_fans(start, nxt, prv, np.empty(nxt.shape[0], dtype=np.int32), fans)
+    return fans
+
+
+def nonmanifold_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Mask (V,) of surface vertices whose incident faces do not form exactly one closed fan,
+    vertices on an edge in other than two faces, or two run the same way, included.  (The
+    link of v, its faces (v, p, q) as edges p -> q, is then not a single cycle.)"""
+    return nonmanifold_of_fans(vertex_fans(faces, n_vertices))
+
+
+def nonmanifold_of_fans(fans: np.ndarray) -> np.ndarray:
+    """nonmanifold_vertices from vertex_fans' result."""
+    return (fans != 1) & (fans != 0)
 
 
 @nb.njit(cache=True)
@@ -277,18 +304,24 @@ class SurfaceTopology:
         return (2 * self.components - self.euler) // 2
 
 
-def surface_topology(faces: np.ndarray, n_vertices: int, *, bad_vertices: int | None = None) -> SurfaceTopology:
+def surface_topology(faces: np.ndarray, n_vertices: int, *, fans: np.ndarray | None = None) -> SurfaceTopology:
     """Edges, manifoldness, components and Euler characteristic of triangles (F, 3).
-    bad_vertices: how many nonmanifold_vertices the faces have, when the caller has counted
-    them already (mesher: remove_pinches checks every boundary vertex), else counted here."""
+    fans: vertex_fans(faces, n_vertices), when the caller has it (remove_pinches).  Where
+    every vertex passes link_fans' slot test every edge is in two faces run opposite ways,
+    3 F / 2 edges; only otherwise are the edges counted (edge_multiplicities)."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     if faces.shape[0] == 0:
         return SurfaceTopology(0, 0, 0, 0, 0, 0, 0)
-    count, forward, n_used = edge_multiplicities(faces, n_vertices)
-    n_edges = count.shape[0]
-    bad_edges = int(np.sum((count != 2) | (forward != 1)))
-    if bad_vertices is None:
-        bad_vertices = int(nonmanifold_vertices(faces, n_vertices).sum())
+    if fans is None:
+        fans = vertex_fans(faces, n_vertices)
+    n_used = int(np.count_nonzero(fans))
+    bad_vertices = int(np.count_nonzero(nonmanifold_of_fans(fans)))
+    if fans.min() >= 0:
+        n_edges, bad_edges = 3 * faces.shape[0] // 2, 0
+    else:
+        count, forward, _ = edge_multiplicities(faces, n_vertices)
+        n_edges = count.shape[0]
+        bad_edges = int(np.sum((count != 2) | (forward != 1)))
     components = _components(faces, n_vertices)
     euler = n_used - n_edges + faces.shape[0]
     return SurfaceTopology(faces.shape[0], n_used, n_edges, bad_edges, bad_vertices, components, euler)
