@@ -1,5 +1,7 @@
 """The exact row-ray kernel against Python-integer and fraction references."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from paroct.octree import octant_lattice_anchors, uniform_leaves
 from . import naive
 
 RNG = np.random.default_rng(7)
+DATA = Path(__file__).resolve().parent.parent / "data"
 
 
 def test_sign_sum_of_products_is_exact_at_the_limits():
@@ -177,6 +180,38 @@ def test_crossings_are_ordered_by_row_cell_fraction_and_face():
     order = np.argsort(keys, kind="stable")
     rays._order_cells(keys, fracs, faces, order)
     assert np.array_equal(order, np.lexsort((faces, fracs, keys)))
+
+
+def test_row_counting_sort_orders_as_argsort(monkeypatch):
+    """row_crossings' counting sort by row against its argsort path (the box limit set below
+    any box), on a curved part with many rows and a CAD part with ties, every direction; and
+    _row_order alone on random keys full of ties, with a box too large for it."""
+    from paroct.surface import load_surface
+
+    for name, divisions in [("bunny", 60), ("angle_block", 30)]:
+        surface = load_surface(DATA / f"{name}.stl")
+        frame = fat_frame(surface.bbox_min, surface.bbox_max, surface.diagonal / divisions)
+        snapped = rays.snap_surface(frame, surface.vertices)
+        faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+        for d in range(7):
+            counted = rays.row_crossings(frame, snapped, faces, d)
+            with monkeypatch.context() as m:
+                m.setattr(rays, "ROW_SORT_BOX", 0)
+                m.setattr(rays, "ROW_SORT_FLOOR", -1)
+                sorted_ = rays.row_crossings(frame, snapped, faces, d)
+            assert counted.keys.size > 100
+            for field in ("keys", "fracs", "signs", "faces"):
+                assert np.array_equal(getattr(counted, field), getattr(sorted_, field)), (name, d, field)
+    rows = RNG.integers(0, 30, size=(4000, 2)) + rays._KEY_OFFSET
+    keys = (rows[:, 0] << (2 * rays._KEY_BITS)) | (rows[:, 1] << rays._KEY_BITS) | RNG.integers(0, 5, size=4000)
+    fracs = RNG.integers(0, 4, size=4000) / 4.0
+    faces = RNG.integers(0, 30, size=4000).astype(np.int32)
+    written = np.sort(RNG.choice(5000, size=4000, replace=False))
+    keys_at, fracs_at, faces_at = (np.zeros(5000, dtype=a.dtype) for a in (keys, fracs, faces))
+    keys_at[written], fracs_at[written], faces_at[written] = keys, fracs, faces
+    order = rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30)
+    assert np.array_equal(order, written[np.lexsort((faces, fracs, keys))])
+    assert rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30 - 1).size == 0
 
 
 @pytest.mark.parametrize("n", [0, 1, 1000])

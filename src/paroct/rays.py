@@ -295,15 +295,73 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     counts = np.empty(triangles.shape[0], dtype=np.int64)
     _row_hits(coords, triangles, bits, offsets, keys, fracs, signs, hit_faces, counts)
     written = written_slots(offsets, counts)
-    # Not a stable sort (3-4x slower): _order_cells orders each run of equal keys by (fraction,
-    # face) and a triangle crosses a row's cell once, so the order is the same.  Ties break on
-    # the position in faces[face_ids], the same order as on faces (ascending ids).
-    order = written[np.argsort(keys[written])]
-    _order_cells(keys, fracs, hit_faces, order)
+    order = _row_order(keys, fracs, hit_faces, written, ROW_SORT_BOX * written.shape[0] + ROW_SORT_FLOOR)
+    if order.shape[0] != written.shape[0]:
+        # Rows spread thinly over their box: a comparison sort.  Not a stable sort (3-4x
+        # slower): _order_cells orders each run of equal keys by (fraction, face) and a
+        # triangle crosses a row's cell once, so the order is the same.  Ties break on the
+        # position in faces[face_ids], the same order as on faces (ascending ids).
+        order = written[np.argsort(keys[written])]
+        _order_cells(keys, fracs, hit_faces, order)
     hit_faces = hit_faces[order]
     if face_ids is not None:
         hit_faces = face_ids[hit_faces].astype(np.int32)
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces)
+
+
+#: row_crossings orders its crossings by a counting sort over the box of their rows when
+#: the box holds at most ROW_SORT_BOX rows a crossing (plus ROW_SORT_FLOOR), else by argsort.
+#: A row holds a few crossings, and the rows crossed fill much of their box on every corpus
+#: model (tray_bottom diag/40: 90 k crossings in 45 k rows of a 52 k-row box).
+ROW_SORT_BOX = 4
+ROW_SORT_FLOOR = 4096
+
+
+@nb.njit(cache=True)
+def _row_order(keys, fracs, faces, written, max_rows):
+    """The slots ``written`` in order of (key, fraction, face), or an empty array if the box of
+    their rows holds more than max_rows rows.  A counting sort by row (the key's high bits,
+    (r2, r3), numbered row-major over their box) groups them; an insertion sort by (key,
+    fraction, face) then moves each only within its row, a few crossings.  The order
+    argsort and _order_cells give (a triangle crosses a row's cell once: no ties)."""
+    n = written.shape[0]
+    mask = (np.int64(1) << _KEY_BITS) - 1
+    lo2 = lo3 = np.int64(1) << 62
+    hi2 = hi3 = np.int64(-1)
+    for i in range(n):
+        key = keys[written[i]]
+        r2 = key >> (2 * _KEY_BITS)
+        r3 = (key >> _KEY_BITS) & mask
+        lo2, hi2, lo3, hi3 = min(lo2, r2), max(hi2, r2), min(lo3, r3), max(hi3, r3)
+    if n == 0:
+        return written.copy()
+    width = hi3 - lo3 + 1
+    n_rows = (hi2 - lo2 + 1) * width
+    if n_rows > max_rows:
+        return np.empty(0, dtype=np.int64)
+    start = np.zeros(n_rows + 1, dtype=np.int64)
+    for i in range(n):
+        key = keys[written[i]]
+        start[((key >> (2 * _KEY_BITS)) - lo2) * width + ((key >> _KEY_BITS) & mask) - lo3 + 1] += 1
+    for r in range(n_rows):
+        start[r + 1] += start[r]
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        key = keys[written[i]]
+        r = ((key >> (2 * _KEY_BITS)) - lo2) * width + ((key >> _KEY_BITS) & mask) - lo3
+        order[start[r]] = written[i]
+        start[r] += 1
+    for i in range(1, n):
+        o = order[i]
+        j = i
+        while j > 0 and (keys[order[j - 1]] > keys[o]
+                         or (keys[order[j - 1]] == keys[o]
+                             and (fracs[order[j - 1]] > fracs[o]
+                                  or (fracs[order[j - 1]] == fracs[o] and faces[order[j - 1]] > faces[o])))):
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = o
+    return order
 
 
 @nb.njit(cache=True)
