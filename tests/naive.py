@@ -360,7 +360,7 @@ def star_violation(lattice_points, coords, tets, inside, cuts, targets, star, bo
     from paroct.quality import tet_quality
     from paroct.stuffing import stuff
 
-    points, out = stuff(lattice_points, coords, tets[star], inside, cuts, targets, flat_ok=True)
+    points, out, _ = stuff(lattice_points, coords, tets[star], inside, cuts, targets, flat_ok=True)
     q = tet_quality(points, out)
     if np.any(q.volume <= 0) or np.any(q.min_dihedral <= 0) or np.any(q.max_dihedral >= 180):
         return 180.0

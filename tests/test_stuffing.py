@@ -70,7 +70,7 @@ def _on_box(coords):
 def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
     """Stuff as _cuts_and_warps sets up; returns (lattice points in space, output points, output tets)."""
     x, inside, cuts, targets = _cuts_and_warps(coords, tets, phi, fracs_of, warp, spacing)
-    points, out = stuff(x, coords, tets, inside, cuts, targets)
+    points, out, _ = stuff(x, coords, tets, inside, cuts, targets)
     return x, points, out
 
 
@@ -214,12 +214,12 @@ def test_stuff_orients_by_the_volume_before_the_warps():
     coords, tets = lattice.leaf_tets(anchors, np.ones(anchors.shape[0], dtype=np.int64))
     phi, fracs = _plane(coords, np.array([0.0, 0.0, 1.0]), float((coords @ LATTICE_TO_SPACE.T)[:, 2].mean()) + 0.1)
     x, inside, cuts, targets = _cuts_and_warps(coords, tets, phi, fracs, warp=True)
-    assert np.all(tet_quality(*stuff(x, coords, tets, inside, cuts, targets)).volume > 0)
+    assert np.all(tet_quality(*stuff(x, coords, tets, inside, cuts, targets)[:2]).volume > 0)
     v = int(np.argmin(np.linalg.norm(x - x.mean(axis=0), axis=1)))  # a vertex in the middle...
     targets[v] = int(np.argmax(np.linalg.norm(cuts.points - x[v], axis=1)))  # ...onto the farthest cut point
     with pytest.raises(AssertionError, match="folded"):
         stuff(x, coords, tets, inside, cuts, targets)
-    points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+    points, out, _ = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
     folded = tet_quality(points, out).volume <= 0
     assert folded.any() and np.all(np.any(out[folded] == v, axis=1))
 
@@ -377,7 +377,7 @@ def test_restuff_gives_what_stuff_gives_and_says_what_it_kept(seed):
     rng = np.random.default_rng(500 + seed)
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
     coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-    points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+    points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
     for _ in range(3):
         new = targets.copy()
         ends = np.concatenate([cuts.starts, cuts.ends])
@@ -387,15 +387,17 @@ def test_restuff_gives_what_stuff_gives_and_says_what_it_kept(seed):
         other = np.where(new >= 0, np.where(cuts.starts[np.maximum(new, 0)] == np.arange(len(new)),
                                             cuts.ends[np.maximum(new, 0)], cuts.starts[np.maximum(new, 0)]), -1)
         new[(new >= 0) & (new[np.maximum(other, 0)] == new)] = -1  # both ends onto one cut point: none
-        want_points, want = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
-        got_points, got, kept = restuff(x, coords, tets, inside, cuts, targets, out, new, flat_ok=True)
+        want_points, want, want_offsets = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+        got_points, got, kept, got_offsets = restuff(x, coords, tets, inside, cuts, targets, out, new,
+                                                     offsets=offsets, flat_ok=True)
         assert np.array_equal(got_points, want_points) and np.array_equal(got, want)
+        assert np.array_equal(got_offsets, want_offsets)
         assert np.array_equal(got[kept >= 0], out[kept[kept >= 0]])
         # A tet through a vertex whose warp changed was stuffed again; most were kept.
         through = np.isin(got, np.flatnonzero(new != targets)).any(axis=1)
         assert through.any() and np.all(kept[through] < 0)
         assert np.count_nonzero(kept < 0) < 0.5 * len(got)
-        targets, out = new, got
+        targets, out, offsets = new, got, got_offsets
 
 
 def test_retarget_warps_mends_needles_and_keeps_the_bound_first():
@@ -409,13 +411,14 @@ def test_retarget_warps_mends_needles_and_keeps_the_bound_first():
     for seed in range(8):
         for k in range(10):
             coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-            points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
             worst, ratio = _violations(points, out, coords), _radius_ratios(points, out, coords)
             needles = np.nonzero((worst == 0) & (ratio < floor))[0]
             if needles.size == 0:
                 continue
-            new, _ = retarget_warps(x, coords, tets, inside, cuts, targets, np.union1d(np.nonzero(worst)[0], needles), floor)
-            points, out = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+            new, _ = retarget_warps(x, coords, tets, inside, cuts, targets, np.union1d(np.nonzero(worst)[0], needles), floor,
+                                    offsets=offsets)
+            points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
             mended, mended_ratio = _violations(points, out, coords), _radius_ratios(points, out, coords)
             assert mended.max() <= worst.max() + 1e-9
             if not worst.any():
@@ -437,11 +440,11 @@ def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_
     for seed in range(8):
         for k in range(10):
             coords, tets, (centre, radius), (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-            points, out = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
             worst = _violations(points, out, coords)
             if not worst.any():
                 continue
-            new, changed = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0])
+            new, changed = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0], offsets=offsets)
             # Only vertices of the lattice tets that gave bad tets move: each shares a lattice
             # tet with a lattice vertex or cut edge end of a bad tet.
             ids = out[worst > 0].ravel().astype(np.int64)
@@ -450,7 +453,7 @@ def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_
             near = np.unique(tets[np.isin(tets, seen).any(axis=1)])
             moved = np.nonzero(new != targets)[0]
             assert changed == moved.size and np.isin(moved, near).all()
-            points, out = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+            points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
             mended = _violations(points, out, coords)
             assert mended.max() <= worst.max() + 1e-9
             before, after = before + np.count_nonzero(worst), after + np.count_nonzero(mended)

@@ -488,7 +488,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
 
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     targets[:n_band] = band.targets
-    points, out_tets = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
+    points, out_tets, _ = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
     stages.done("stuff")
     # The lattice's tets, vertices and the band's cut-edge tables are done with: freed before
     # _finish's face matching allocates its own, they are not in the peak.
@@ -718,7 +718,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     spacing = vertex_spacing(vertices, sides)
     targets = warp_targets(cuts, coords, frame.h, spacing)
     lattice_points = frame.to_space(coords)
-    points, out_tets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
+    points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
     stages.done("stuff")
 
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
@@ -729,13 +729,13 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         if not (is_bad.any() or is_needle.any()):
             break
         new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
-                                              np.flatnonzero(is_bad | is_needle), NEEDLE_RATIO)
+                                              np.flatnonzero(is_bad | is_needle), NEEDLE_RATIO, offsets=offsets)
         if not changed:
             break
         # Only the lattice tets around the vertices that warp elsewhere change: stuff and
         # measure those again, keep the rest.
-        points, out_tets, kept = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets, new_targets,
-                                         flat_ok=True)
+        points, out_tets, kept, offsets = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
+                                                  new_targets, offsets=offsets, flat_ok=True)
         targets = new_targets
         again = np.flatnonzero(kept < 0)
         is_bad, is_needle = is_bad[kept], is_needle[kept]
@@ -769,7 +769,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         stages.done("quality")
         return None, asks
     # As in _mesh_at: what stuffing needed is freed before _finish allocates.
-    del vertices, coords, tets, cuts, spacing, lattice_points, keys, levels, in_band, is_bad, is_needle
+    del vertices, coords, tets, cuts, spacing, lattice_points, keys, levels, in_band, is_bad, is_needle, offsets
     return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
 
 

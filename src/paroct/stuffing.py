@@ -655,8 +655,9 @@ def _signs(inside, targets):
 
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
-          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points kept.
+          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points
+    kept, and offsets (T + 1,) int64: lattice tet t's tets are tets[offsets[t]:offsets[t + 1]].
 
     lattice_points: (V, 3) space positions of the lattice vertices; coords: (V, 3) their
     lattice coordinates; tets: (T, 4) lattice tets; inside: (V,) class of each vertex;
@@ -668,8 +669,8 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     mends or refines where one is bad (retarget_warps).
     """
     points, signs = _warped(lattice_points, inside, cuts, targets)
-    out, _ = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok)
-    return points, out
+    out, offsets = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok)
+    return points, out, offsets
 
 
 def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
@@ -690,33 +691,33 @@ def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
 
 
 def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
-            targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *,
-            flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """stuff(..., new_targets), given out = stuff(..., targets)[1]: only the lattice tets with a
-    vertex whose warp changed are stuffed again, the others' tets are copied.
+            targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *, offsets: np.ndarray,
+            flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """stuff(..., new_targets), given out, offsets = stuff(..., targets)[1:]: only the lattice
+    tets with a vertex whose warp changed are stuffed again, the others' tets are copied.
 
-    Returns (points, tets (M, 4) int32, kept (M,) int64): the same points and tets as stuff
-    with new_targets, and for each tet its index in out, or -1 if it was stuffed again.
+    Returns (points, tets (M, 4) int32, kept (M,) int64, offsets): the same points, tets and
+    offsets as stuff with new_targets, and for each tet its index in out, or -1 if it was
+    stuffed again.
     """
     tets = np.ascontiguousarray(tets)
+    if offsets.shape[0] != tets.shape[0] + 1 or offsets[-1] != out.shape[0]:
+        raise ValueError(f"len(offsets) = {offsets.shape[0]} ending at {offsets[-1]}, but {tets.shape[0]} lattice tets "
+                         f"stuffed into len(out) = {out.shape[0]}")
     points, signs = _warped(lattice_points, inside, cuts, new_targets)
-    counts = _stencil_counts(tets, _signs(inside, targets))
-    old_offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts, out=old_offsets[1:])
-    if old_offsets[-1] != out.shape[0]:
-        raise ValueError(f"len(out) = {out.shape[0]}, but targets stuff {old_offsets[-1]} tets")
     rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
                                         flat_ok)
+    counts = np.diff(offsets)
     counts[rows] = np.diff(again_offsets)
-    offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts, out=offsets[1:])
+    new_offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
+    np.cumsum(counts, out=new_offsets[1:])
     again_row = np.full(tets.shape[0], -1, dtype=np.int64)
     again_row[rows] = np.arange(rows.shape[0])
-    new_out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
+    new_out = np.empty((int(new_offsets[-1]), 4), dtype=np.int32)
     kept = np.empty(new_out.shape[0], dtype=np.int64)
-    _splice(out, old_offsets, again, again_offsets, again_row, offsets, new_out, kept)
-    return points, new_out, kept
+    _splice(out, offsets, again, again_offsets, again_row, new_offsets, new_out, kept)
+    return points, new_out, kept, new_offsets
 
 
 @nb.njit(cache=True, parallel=True)
@@ -835,7 +836,8 @@ RETARGET_SWEEPS = 4
 
 
 def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
-                   cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0) -> tuple[np.ndarray, int]:
+                   cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0, *,
+                   offsets: np.ndarray) -> tuple[np.ndarray, int]:
     """Mend stuffed tets outside DIHEDRAL_BOUND (and needles: 3r/R below min_ratio) by choosing
     other warps near them.
 
@@ -846,15 +848,15 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     point of any of its cut edges, or not at all; the choice that leaves its star's worst
     angle least outside the bound is kept (_retarget), among equals the one with the fattest
     star by 3r/R.  Tets the warps would fold count as outside.  Arguments as for stuff, and
-    bad: indices of the bad tets (outside the bound or needles) in stuff's output.
+    bad: indices of the bad tets (outside the bound or needles) in stuff's output, offsets:
+    stuff's (where each lattice tet's tets start in it).
     Returns (new warp targets (V,), how many vertices warp elsewhere); the caller stuffs again
     and measures: this is a search, it certifies nothing.
     """
     tets = np.ascontiguousarray(tets)
     new = targets.copy()
     points, signs = _warped(lattice_points, inside, cuts, new)
-    offsets = np.cumsum(_stencil_counts(tets, signs))
-    owners = np.searchsorted(offsets, bad, side="right")  # the lattice tet each came from
+    owners = np.searchsorted(offsets, bad, side="right") - 1  # the lattice tet each came from
     vertices = np.unique(tets[owners].ravel()).astype(np.int64)
     marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
