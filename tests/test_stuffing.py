@@ -16,7 +16,7 @@ from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _signs, _star_score, _stencil_counts, _stencils,
-                              _stencils_in_chunks, _warped, collect_cut_edges, mixed_tets, restuff, retarget_warps,
+                              _stencils_in_chunks, _warped, collect_cut_edges, restuff, retarget_warps,
                               stuff, warp_targets)
 from paroct.topology import match_faces
 
@@ -51,7 +51,7 @@ def _cuts_and_warps(coords, tets, phi, fracs_of, warp, spacing=None):
     vertex's finest leaf side, default 1), never for vertices on the hull of coords."""
     x = coords @ LATTICE_TO_SPACE.T
     inside = phi > 0
-    starts, ends, _, *table = collect_cut_edges(mixed_tets(tets, inside), inside, coords)
+    starts, ends, _, *table = collect_cut_edges(tets, inside, coords)
     fracs = fracs_of(x, starts, ends)
     cut_points = x[starts] + fracs[:, None] * (x[ends] - x[starts])
     cuts = CutEdges(starts, ends, np.full(starts.shape[0], -1), fracs, cut_points, tuple(table))
@@ -286,16 +286,6 @@ def _radius_ratios(points, out, coords):
     return np.where(on_box, 1.0, np.where(q.volume > 0, q.radius_ratio, 0.0))
 
 
-@pytest.mark.parametrize("n_tets", [0, 1, 5, 63, 64, 65, 1000])
-def test_mixed_tets_are_the_rows_of_both_classes_in_order(n_tets):
-    rng = np.random.default_rng(n_tets)
-    inside = rng.random(50) < 0.5
-    tets = rng.integers(0, 50, (n_tets, 4)).astype(np.int32)
-    want = tets[inside[tets].any(axis=1) & ~inside[tets].all(axis=1)]
-    got = mixed_tets(tets, inside)
-    assert got.dtype == tets.dtype and np.array_equal(got, want.reshape(-1, 4))
-
-
 def test_warped_moves_the_warped_vertices_onto_their_cut_points_and_appends_the_cut_points():
     k = next(k for k in range(20) if (_sphere_cuts(0, k)[3][3] >= 0).any())
     coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(0, k)
@@ -329,8 +319,10 @@ def test_cut_edges_are_the_distinct_mixed_edges_in_order_of_first_occurrence(n_v
     coords = rng.integers(0, 3, (n_vertices, 3))
     inside = rng.random(n_vertices) < 0.5
     tets = rng.integers(0, n_vertices, (n_tets, 4)).astype(np.int32)
-    _check_cut_edges(mixed_tets(tets, inside), inside, coords)
+    _check_cut_edges(tets, inside, coords)
     _check_cut_edges(tets.astype(np.int64), inside, coords)
+    mixed = inside[tets].any(axis=1) & ~inside[tets].all(axis=1)
+    _check_cut_edges(tets[mixed], inside, coords)
 
 
 @pytest.mark.parametrize("seed", range(2))
@@ -339,13 +331,13 @@ def test_cut_edges_of_lattices_cut_by_a_sphere(seed):
     seven directions, each edge in several tets."""
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
     coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-    assert (_check_cut_edges(mixed_tets(tets, inside), inside, coords) < 0).all()
+    assert (_check_cut_edges(tets, inside, coords) < 0).all()
     anchors = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
     anchors = anchors[np.argsort(morton_keys(anchors))]
     vertices = lattice.number_vertices(anchors, np.ones(anchors.shape[0], dtype=np.int64))
     coords, tets = vertices.coords, lattice.graded_tets(vertices)
     inside = np.linalg.norm(coords @ LATTICE_TO_SPACE.T - 3.0 - 0.1 * seed, axis=1) < 2.2
-    dirs = _check_cut_edges(mixed_tets(tets, inside), inside, coords)
+    dirs = _check_cut_edges(tets, inside, coords)
     assert np.array_equal(np.unique(dirs), np.arange(7))
 
 

@@ -27,7 +27,7 @@ from .octree import FaceBuckets, balance, face_buckets, faces_meeting_cells, oct
 from .quality import dihedral_outliers, summarize
 from .repair import band_mask, remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
-from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, mixed_tets, restuff, retarget_warps,
+from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
                        stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import SurfaceTopology
@@ -983,8 +983,7 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
     """Cut points of every edge of the tets whose ends differ in class: unit lattice edges
     along their rows, others (coarse lattice edges, template edges) against the triangles of
     ``buckets`` (needed only if there are such edges)."""
-    mixed = mixed_tets(np.ascontiguousarray(tets), inside)
-    starts, ends, dirs, *table = collect_cut_edges(mixed, inside, coords)
+    starts, ends, dirs, *table = collect_cut_edges(np.ascontiguousarray(tets), inside, coords)
     fracs = np.empty(starts.shape[0])
     other = np.nonzero(dirs < 0)[0]
     if other.size:

@@ -218,10 +218,9 @@ def surface_faces(tets, core):
     """The faces (C, 3) of tets without a core vertex, oriented outward, in order of tet and
     face (TET_FACES): the only faces that can lie on the boundary of a stuffed mesh (its
     vertices are cut points and warped vertices, on the surface).  Count per chunk, prefix
-    sum, fill: each thread writes only its chunks' rows, as in stuffing.mixed_tets.  The
-    two keep their own counting loops: a kernel taking the per-tet count as a function
-    argument is compiled again in every process (numba caches no function-typed
-    signature: 2.2 s a process, measured)."""
+    sum, fill: each thread writes only its chunks' rows.  (A skeleton shared with other
+    count-and-fill kernels, taking the per-tet count as a function argument, is compiled
+    again in every process: numba caches no function-typed signature, 2.2 s a process.)"""
     m = tets.shape[0]
     n_chunks = max(min(m, TET_CHUNKS), 1)
     starts = np.zeros(n_chunks + 1, dtype=np.int64)
