@@ -105,7 +105,7 @@ def _row_range(lo, hi, unit_bits):
     return first, last, unit
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _hit(tri, r2, r3, unit):
     """Crossing of row (r2, r3) with a triangle (3, 3) int64 in row coordinates.
 
@@ -124,7 +124,7 @@ def _hit(tri, r2, r3, unit):
     return True, sa, t, wa, wb, wc, dd
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _cell_of(tri, t, wa, wb, wc, dd, unit_bits):
     """Exact lattice cell j = floor(t / unit) of a crossing and its fraction t / unit - j in [0, 1)."""
     unit = np.int64(1) << unit_bits
