@@ -493,18 +493,18 @@ def _orient3d(ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz):
     return bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx)
 
 
-@nb.njit(cache=True)
-def _segment_hit(a, b, tri):
+@nb.njit(cache=True, inline="always")
+def _segment_hit(ax, ay, az, bx, by, bz, tri):
     """Parameter t in [0, 1] where the segment a + t (b - a) crosses the triangle tri (3, 3),
     or -1.0 if it does not (floats; a hit through an edge of the triangle may be missed or
     found twice, which only changes which crossing is chosen)."""
-    d0 = _orient3d(a[0], a[1], a[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
-    d1 = _orient3d(b[0], b[1], b[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    d0 = _orient3d(ax, ay, az, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    d1 = _orient3d(bx, by, bz, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
     if (d0 > 0 and d1 > 0) or (d0 < 0 and d1 < 0) or d0 == d1:
         return -1.0
-    s0 = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2])
-    s1 = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
-    s2 = _orient3d(a[0], a[1], a[2], b[0], b[1], b[2], tri[2, 0], tri[2, 1], tri[2, 2], tri[0, 0], tri[0, 1], tri[0, 2])
+    s0 = _orient3d(ax, ay, az, bx, by, bz, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1], tri[1, 2])
+    s1 = _orient3d(ax, ay, az, bx, by, bz, tri[1, 0], tri[1, 1], tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    s2 = _orient3d(ax, ay, az, bx, by, bz, tri[2, 0], tri[2, 1], tri[2, 2], tri[0, 0], tri[0, 1], tri[0, 2])
     if not ((s0 >= 0 and s1 >= 0 and s2 >= 0) or (s0 <= 0 and s1 <= 0 and s2 <= 0)):
         return -1.0
     return min(max(d0 / (d0 - d1), 0.0), 1.0)
@@ -527,29 +527,26 @@ def _bucket_boxes(bucket_faces, triangles, slack):
 def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts, ends, start_inside,
                   cell_bits, key_shift, out, status):
     boxes = _bucket_boxes(bucket_faces, triangles, _BOX_SLACK)
+    # Scalars, not small arrays: five allocations an edge, and a call per triangle tried,
+    # were most of the kernel.
     for e in nb.prange(starts.shape[0]):
-        a = np.empty(3)
-        b = np.empty(3)
-        lo = np.empty(3)
-        hi = np.empty(3)
-        cell = np.empty(3, dtype=np.int64)
-        for i in range(3):
-            a[i] = coords[starts[e], i]
-            b[i] = coords[ends[e], i]
-            lo[i] = min(a[i], b[i])
-            hi[i] = max(a[i], b[i])
-            # The cell holding the midpoint holds the whole edge: edges lie in one leaf of
-            # this level or finer.  On a cell face either neighbour's bucket has the faces.
-            cell[i] = ((coords[starts[e], i] + coords[ends[e], i]) >> (cell_bits + 1)) << cell_bits
-        key = morton_key(cell[0] << key_shift, cell[1] << key_shift, cell[2] << key_shift)
+        p, q = starts[e], ends[e]
+        ax, ay, az = float(coords[p, 0]), float(coords[p, 1]), float(coords[p, 2])
+        bx, by, bz = float(coords[q, 0]), float(coords[q, 1]), float(coords[q, 2])
+        # The cell holding the midpoint holds the whole edge: edges lie in one leaf of this
+        # level or finer.  On a cell face either neighbour's bucket has the faces.
+        cx = ((coords[p, 0] + coords[q, 0]) >> (cell_bits + 1)) << cell_bits
+        cy = ((coords[p, 1] + coords[q, 1]) >> (cell_bits + 1)) << cell_bits
+        cz = ((coords[p, 2] + coords[q, 2]) >> (cell_bits + 1)) << cell_bits
+        key = morton_key(cx << key_shift, cy << key_shift, cz << key_shift)
         k = np.searchsorted(bucket_keys, key)
         best = -1.0
         if k < bucket_keys.shape[0] and bucket_keys[k] == key:
             for j in range(offsets[k], offsets[k + 1]):
-                if (boxes[j, 0] > hi[0] or boxes[j, 1] > hi[1] or boxes[j, 2] > hi[2]
-                        or boxes[j, 3] < lo[0] or boxes[j, 4] < lo[1] or boxes[j, 5] < lo[2]):
+                if (boxes[j, 0] > max(ax, bx) or boxes[j, 1] > max(ay, by) or boxes[j, 2] > max(az, bz)
+                        or boxes[j, 3] < min(ax, bx) or boxes[j, 4] < min(ay, by) or boxes[j, 5] < min(az, bz)):
                     continue
-                t = _segment_hit(a, b, triangles[bucket_faces[j]])
+                t = _segment_hit(ax, ay, az, bx, by, bz, triangles[bucket_faces[j]])
                 if t < 0:
                     continue
                 # The crossing nearest the inside end, as for unit edges.
