@@ -8,9 +8,9 @@ import pytest
 
 from paroct import rays
 from paroct.errors import ParoctError
-from paroct.frame import X_AXIS_DIRECTION, fat_frame
+from paroct.frame import LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
 from paroct.lattice import leaf_tets
-from paroct.mesher import mesh
+from paroct.mesher import _cut_points, mesh
 from paroct.octree import octant_lattice_anchors, uniform_leaves
 from paroct.quality import tet_dihedral_angles, tet_quality
 from paroct.stuffing import PRISM_TETS
@@ -411,3 +411,17 @@ def test_vertex_classes_from_leaves_equal_winding_numbers(name, max_factor):
     inside = vertex_classes(vertices, band.inside)
     assert inside.any() and not inside.all()
     assert np.array_equal(inside, rays.winding_numbers(crossings[X_AXIS_DIRECTION], vertices.coords) > 0)
+
+
+@pytest.mark.parametrize("n_edges", [0, 1, 1000])
+def test_cut_points_are_the_frames_space_points_along_the_edges_rounded_alike(n_edges):
+    """_cut_points against numpy's lattice points along the edges, mapped by FatFrame.to_space:
+    bit for bit (fractions 0 and 1 included)."""
+    rng = np.random.default_rng(n_edges)
+    frame = fat_frame(np.array([-1.5, 0.25, 3.0]), np.array([2.0, 1.75, 4.5]), 0.037)
+    coords = rng.integers(0, 1 << frame.levels, (50, 3))
+    starts, ends = rng.integers(0, 50, n_edges), rng.integers(0, 50, n_edges)
+    fracs = np.where(rng.random(n_edges) < 0.1, rng.integers(0, 2, n_edges).astype(float), rng.random(n_edges))
+    want = frame.to_space(coords[starts] + fracs[:, None] * (coords[ends] - coords[starts]))
+    got = _cut_points(coords, starts, ends, fracs, frame.origin, float(frame.h), LATTICE_TO_SPACE)
+    assert got.shape == (n_edges, 3) and np.array_equal(got, want)

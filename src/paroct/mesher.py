@@ -18,7 +18,7 @@ from .check import far_from_points
 from .errors import ParoctError
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
-from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, fat_frame
+from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
                    no_band_levels, surface_prune)
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
@@ -1012,7 +1012,9 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
             rows = rays.row_crossings(frame, snapped, faces, d, near)
         rays.add_edge_cut_fractions(rows, coords, starts, inside, dirs, fracs, status)
     report.unresolved_cuts += int(status.sum())
-    return CutEdges(starts, ends, dirs, fracs, frame.to_space(_along_edges(coords, starts, ends, fracs)), tuple(table))
+    points = _cut_points(coords, starts, ends, fracs, np.ascontiguousarray(frame.origin, dtype=np.float64),
+                         float(frame.h), LATTICE_TO_SPACE)
+    return CutEdges(starts, ends, dirs, fracs, points, tuple(table))
 
 
 def _faces_near_unit_edges(frame: FatFrame, buckets: FaceBuckets, coords: np.ndarray, starts: np.ndarray,
@@ -1030,14 +1032,17 @@ def _faces_near_unit_edges(frame: FatFrame, buckets: FaceBuckets, coords: np.nda
 
 
 @nb.njit(cache=True, parallel=True)
-def _along_edges(coords, starts, ends, fracs):
-    """Points (E, 3) float64 at fraction fracs[e] from coords[starts[e]] to coords[ends[e]]
-    (coords[starts] + fracs[:, None] * (coords[ends] - coords[starts]), same rounding)."""
+def _cut_points(coords, starts, ends, fracs, origin, h, matrix):
+    """Space points (E, 3) float64 at fraction fracs[e] from coords[starts[e]] to
+    coords[ends[e]]: frame.to_space(coords[starts] + fracs[:, None] * (coords[ends] -
+    coords[starts])), same rounding, without the lattice points' array in between."""
     out = np.empty((starts.shape[0], 3))
     for e in nb.prange(starts.shape[0]):
-        for i in range(3):
-            a = coords[starts[e], i]
-            out[e, i] = float(a) + fracs[e] * float(coords[ends[e], i] - a)
+        p, q = starts[e], ends[e]
+        f = fracs[e]
+        space_point(origin, h, matrix, float(coords[p, 0]) + f * float(coords[q, 0] - coords[p, 0]),
+                    float(coords[p, 1]) + f * float(coords[q, 1] - coords[p, 1]),
+                    float(coords[p, 2]) + f * float(coords[q, 2] - coords[p, 2]), out, e)
     return out
 
 
