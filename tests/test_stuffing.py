@@ -15,7 +15,7 @@ from paroct import lattice
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _signs, _star_score, _stencil_counts, _stencils,
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _signs, _star_score, _stencil_offsets, _stencils,
                               _stencils_in_chunks, _warped, collect_cut_edges, restuff, retarget_warps,
                               stuff, warp_targets)
 from paroct.topology import match_faces
@@ -350,8 +350,8 @@ def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
     signs = _signs(inside, targets)
     for n in (tets.shape[0], 37, 1):
         part = np.ascontiguousarray(tets[:n])
-        offsets = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(_stencil_counts(part, signs), out=offsets[1:])
+        offsets = _stencil_offsets(part, signs)
+        assert offsets.shape == (n + 1,) and offsets[0] == 0 and (np.diff(offsets) >= 0).all()
         outputs = []
         for kernel in (_stencils, _stencils_in_chunks):
             out = np.full((int(offsets[-1]), 4), -1, dtype=np.int32)
