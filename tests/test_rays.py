@@ -214,6 +214,29 @@ def test_row_counting_sort_orders_as_argsort(monkeypatch):
     assert rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30 - 1).size == 0
 
 
+def test_crossings_of_only_the_triangles_whose_boxes_hold_rows_are_all_crossings(monkeypatch):
+    """row_crossings filling in only the triangles whose boxes hold a row (the bunny at
+    diag/20: most triangles are smaller than the rows' spacing) against filling in every
+    triangle, every direction, whole and on a subset of the faces."""
+    from paroct.surface import load_surface
+
+    surface = load_surface(DATA / "bunny.stl")
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, surface.diagonal / 20)
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    some = np.flatnonzero(RNG.random(faces.shape[0]) < 0.5)
+    for d in range(7):
+        for face_ids in (None, some):
+            with monkeypatch.context() as m:
+                m.setattr(rays, "SPARSE_CROSSING", 1.01)
+                sparse = rays.row_crossings(frame, snapped, faces, d, face_ids)
+                m.setattr(rays, "SPARSE_CROSSING", 0.0)
+                full = rays.row_crossings(frame, snapped, faces, d, face_ids)
+            assert full.keys.size > 50
+            for field in ("keys", "fracs", "signs", "faces"):
+                assert np.array_equal(getattr(sparse, field), getattr(full, field)), (d, field)
+
+
 @pytest.mark.parametrize("n", [0, 1, 1000])
 def test_to_space_rounds_as_the_matrix_product(n):
     """The parallel kernel gives numpy's origin + h * (u @ LATTICE_TO_SPACE.T) to the bit, for

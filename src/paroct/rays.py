@@ -285,6 +285,13 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     bounds = np.empty(triangles.shape[0], dtype=np.int64)
     none_i8, none_i32, none_i64 = np.empty(0, dtype=np.int8), np.empty(0, dtype=np.int32), np.empty(0, dtype=np.int64)
     _row_hits(coords, triangles, bits, none_i64, none_i64, np.empty(0), none_i8, none_i32, bounds)
+    crossing = np.flatnonzero(bounds)
+    if crossing.shape[0] < SPARSE_CROSSING * triangles.shape[0]:
+        # On a tessellation finer than the rows most triangles' boxes hold no row (armadillo
+        # at diag/40: 1-5 k of 86 k): the fill visits only the others.  Their ids keep the
+        # order of faces, so the crossings' order is the same.
+        triangles, bounds = np.take(triangles, crossing, axis=0), np.take(bounds, crossing)
+        face_ids = crossing if face_ids is None else np.take(face_ids, crossing)
     offsets = np.zeros(bounds.shape[0] + 1, dtype=np.int64)
     np.cumsum(bounds, out=offsets[1:])
     room = int(offsets[-1])
@@ -309,6 +316,11 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces)
 
 
+#: row_crossings fills in only the triangles whose boxes hold a row when they are fewer than
+#: this fraction of the triangles: gathering them costs less than visiting the others again
+#: (per direction, bunny diag/40 at half its triangles 385 -> 330 us, fandisk at a third
+#: 610 -> 450 us, armadillo at a tenth 2.6 -> 1.6 ms).
+SPARSE_CROSSING = 0.9
 #: row_crossings orders its crossings by a counting sort over the box of their rows when
 #: the box holds at most ROW_SORT_BOX rows a crossing (plus ROW_SORT_FLOOR), else by argsort.
 #: A row holds a few crossings, and the rows crossed fill much of their box on every corpus
