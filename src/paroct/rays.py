@@ -305,7 +305,7 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     order = _row_order(keys, fracs, hit_faces, written, ROW_SORT_BOX * written.shape[0] + ROW_SORT_FLOOR)
     if order.shape[0] != written.shape[0]:
         # Rows spread thinly over their box: a comparison sort.  Not a stable sort (3-4x
-        # slower): _order_cells orders each run of equal keys by (fraction, face) and a
+        # slower): _order_cells orders each run of equal keys by (fraction, face), and a
         # triangle crosses a row's cell once, so the order is the same.  Ties break on the
         # position in faces[face_ids], the same order as on faces (ascending ids).
         order = written[np.argsort(keys[written])]
@@ -333,9 +333,9 @@ ROW_SORT_FLOOR = 4096
 def _row_order(keys, fracs, faces, written, max_rows):
     """The slots ``written`` in order of (key, fraction, face), or an empty array if the box of
     their rows holds more than max_rows rows.  A counting sort by row (the key's high bits,
-    (r2, r3), numbered row-major over their box) groups them; an insertion sort by (key,
-    fraction, face) then moves each only within its row, a few crossings.  The order
-    argsort and _order_cells give (a triangle crosses a row's cell once: no ties)."""
+    (r2, r3), numbered row-major over their box) groups them; _order_cells then moves each
+    only within its row, a few crossings.  The order argsort and _order_cells give (a
+    triangle crosses a row's cell once: no ties)."""
     n = written.shape[0]
     mask = (np.int64(1) << _KEY_BITS) - 1
     lo2 = lo3 = np.int64(1) << 62
@@ -363,7 +363,17 @@ def _row_order(keys, fracs, faces, written, max_rows):
         r = ((key >> (2 * _KEY_BITS)) - lo2) * width + ((key >> _KEY_BITS) & mask) - lo3
         order[start[r]] = written[i]
         start[r] += 1
-    for i in range(1, n):
+    _order_cells(keys, fracs, faces, order)
+    return order
+
+
+@nb.njit(cache=True)
+def _order_cells(keys, fracs, faces, order):
+    """Sort ``order`` by (key, fraction, face) with an insertion sort.  Given an order already
+    sorted by key (argsort), or grouped by row in row order (_row_order), each crossing moves
+    only within its cell or row, which hold a crossing or two (np.lexsort on the three
+    columns cost half of row_crossings)."""
+    for i in range(1, order.shape[0]):
         o = order[i]
         j = i
         while j > 0 and (keys[order[j - 1]] > keys[o]
@@ -373,29 +383,6 @@ def _row_order(keys, fracs, faces, written, max_rows):
             order[j] = order[j - 1]
             j -= 1
         order[j] = o
-    return order
-
-
-@nb.njit(cache=True)
-def _order_cells(keys, fracs, faces, order):
-    """Sort ``order`` (already sorted by key) by (fraction, face) within each run of equal
-    keys: an insertion sort, as a cell of a row holds a crossing or two (np.lexsort on the
-    three columns cost half of row_crossings)."""
-    start = 0
-    n = order.shape[0]
-    while start < n:
-        end = start + 1
-        while end < n and keys[order[end]] == keys[order[start]]:
-            end += 1
-        for i in range(start + 1, end):
-            o = order[i]
-            j = i
-            while j > start and (fracs[order[j - 1]] > fracs[o]
-                                 or (fracs[order[j - 1]] == fracs[o] and faces[order[j - 1]] > faces[o])):
-                order[j] = order[j - 1]
-                j -= 1
-            order[j] = o
-        start = end
 
 
 def winding_numbers(crossings: RowCrossings, points: np.ndarray) -> np.ndarray:
