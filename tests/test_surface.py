@@ -67,6 +67,23 @@ def test_weld_matches_np_unique_on_shuffled_soups(seed):
     assert not np.any(np.signbit(welded[welded == 0]))
 
 
+@pytest.mark.parametrize("seed", range(2))
+def test_weld_of_float32_corners_matches_their_float64_weld(seed):
+    """Binary STL's float32 corners are welded as they are stored: the same vertices, faces
+    and order as after converting them, -0.0 merged with 0.0 at either width."""
+    rng = np.random.default_rng(seed)
+    vertices, faces = _arrays(manifold3d.Manifold.cube([2.0, 1.0, 1.0]).translate([0.1, 0.0, 0.0]))
+    soup, soup_faces = _soup(vertices, faces, rng)
+    soup = soup.astype(np.float32)  # 0.1 and 2.1 are not exact in float32: rounded once, alike
+    zeros = soup == 0
+    assert np.signbit(soup[zeros]).any() and not np.signbit(soup[zeros]).all()
+    single, double = _weld(soup, soup_faces), _weld(soup.astype(np.float64), soup_faces)
+    assert single[0].dtype == np.float64 and single[2] and double[2]
+    assert np.array_equal(single[0], double[0]) and np.array_equal(single[1], double[1])
+    assert not np.any(np.signbit(single[0][single[0] == 0]))
+    assert single[0].shape[0] == vertices.shape[0]
+
+
 def test_weld_reports_a_non_finite_corner():
     vertices, faces = _arrays(SOLIDS["cube"]())
     assert _weld(vertices, faces)[2]
