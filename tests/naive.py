@@ -401,3 +401,30 @@ def cut_edges(tets: np.ndarray, inside: np.ndarray, coords: np.ndarray) -> tuple
             ends.append(q)
             dirs.append(int(hits[0]) if hits.size else -1)
     return np.array(starts, dtype=np.int64), np.array(ends, dtype=np.int64), np.array(dirs, dtype=np.int64)
+
+
+def warp_targets(coords: np.ndarray, starts, ends, fracs, spacing, h: float) -> np.ndarray:
+    """Labelle & Shewchuk's warps as stuffing.warp_targets states them, edge by edge: alpha
+    0.24999 for long lattice edges (two nonzero components), 0.41189 for short ones, 0.24999
+    for edges off the lattices (a leaf of side 2 gcd(|d|)); each end's reach is alpha times
+    min(1, its spacing / the edge's spacing); a vertex warps to its closest violating cut
+    point, the first such edge on ties."""
+    from math import gcd
+
+    from paroct.frame import LATTICE_TO_SPACE
+
+    best = np.full(coords.shape[0], np.inf)
+    target = np.full(coords.shape[0], -1, dtype=np.int64)
+    for e, (a, b, f) in enumerate(zip(starts.tolist(), ends.tolist(), fracs.tolist())):
+        d = coords[b] - coords[a]
+        s = int(np.abs(d).max())
+        on_lattice = s > 0 and set(np.abs(d).tolist()) <= {0, s} and (np.all(d >= 0) or np.all(d <= 0))
+        if on_lattice:
+            alpha = 0.24999 if np.count_nonzero(d) == 2 else 0.41189
+        else:
+            alpha, s = 0.24999, 2 * gcd(*np.abs(d).tolist())
+        length = float(np.linalg.norm(LATTICE_TO_SPACE @ d)) * h
+        for v, t in ((a, f), (b, 1.0 - f)):
+            if t < alpha * min(1.0, spacing[v] / s) and t * length < best[v]:
+                best[v], target[v] = t * length, e
+    return target

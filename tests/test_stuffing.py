@@ -22,6 +22,7 @@ from paroct.topology import match_faces
 
 from .naive import cut_edges as naive_cut_edges
 from .naive import star_violation
+from .naive import warp_targets as naive_warp_targets
 from .test_grading import _random_balanced_tree
 
 #: Labelle & Shewchuk's bound for the BCC lattice, degrees.
@@ -173,6 +174,27 @@ def test_graded_octrees_stuff_conforming_with_the_clipped_volume(seed, warp):
     for _ in range(20):
         normal, offset = _random_plane(rng, coords)
         _check_plane_cut(coords, tets, normal, offset, warp, spacing)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_warp_targets_match_the_naive_rule_on_graded_octrees(seed):
+    """Lattice edges of several spacings and template edges, cut at random fractions (a tenth
+    exactly at an end, and many ties between equal distances), with each vertex's finest
+    leaf side as its spacing."""
+    rng = np.random.default_rng(seed)
+    anchors, sides = _random_balanced_tree(seed, 3 + seed % 2)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
+    spacing = lattice.vertex_spacing(vertices, sides)
+    inside = rng.random(coords.shape[0]) < 0.5
+    starts, ends, dirs, *table = collect_cut_edges(tets, inside, coords)
+    fracs = rng.choice([0.0, 0.1, 0.2, 0.25, 0.4, 0.5, 0.75, 1.0], starts.shape[0])
+    fracs[::3] = rng.random(fracs[::3].shape[0])
+    cuts = CutEdges(starts, ends, dirs, fracs, np.zeros((starts.shape[0], 3)), tuple(table))
+    h = 0.7
+    targets = warp_targets(cuts, coords, h, spacing)
+    assert np.array_equal(targets, naive_warp_targets(coords, starts, ends, fracs, spacing, h))
+    assert (targets >= 0).sum() > coords.shape[0] // 10 and (dirs < 0).any()
 
 
 def test_vertex_spacing_is_the_finest_leaf_side_at_each_vertex():

@@ -154,60 +154,78 @@ def _edge_slot(first, last, partner, a, b):
 
 
 @nb.njit(cache=True)
-def _warp(n_vertices, starts, ends, fracs, lengths, start_reach, end_reach):
-    """Warp target per vertex: the cut edge (index) of its closest violating cut point, or -1.
-    The cut of edge e violates its start when fracs[e] < start_reach[e], its end when
-    1 - fracs[e] < end_reach[e]; lengths[e] turns fractions into distances."""
+def _warp(n_vertices, starts, ends, distance, violated):
+    """Warp target per vertex (V,) int64: the cut edge (index) of its closest violating cut
+    point, or -1 (_violations: which end each cut violates, at what distance)."""
     best = np.full(n_vertices, np.inf)
     target = np.full(n_vertices, -1, dtype=np.int64)
     for e in range(starts.shape[0]):
-        f = fracs[e]
-        if f < start_reach[e]:
-            d = f * lengths[e]
-            v = starts[e]
-            if d < best[v]:
-                best[v] = d
-                target[v] = e
-        if 1.0 - f < end_reach[e]:
-            d = (1.0 - f) * lengths[e]
-            v = ends[e]
-            if d < best[v]:
-                best[v] = d
-                target[v] = e
+        if violated[e] < 0:
+            continue
+        v = starts[e] if violated[e] == 0 else ends[e]
+        if distance[e] < best[v]:
+            best[v] = distance[e]
+            target[v] = e
     return target
 
 
 @nb.njit(cache=True, parallel=True)
-def _edge_reach(coords, starts, ends, spacing, to_space, alpha_long, alpha_short):
-    """Space length in units of h (E,) and the warp reach of each end (E,), (E,) (see
-    warp_targets)."""
+def _violations(coords, starts, ends, fracs, spacing, to_space, h, alpha_long, alpha_short):
+    """Which end of each cut edge its cut point violates (E,) int8: 0 the start (fracs[e] below
+    the start's reach, _end_reaches), 1 the end (1 - fracs[e] below the end's), -1 neither;
+    and the distance (E,) from that end in space units (h times the edge's length through
+    to_space; inf for neither).  Never both: reaches are at most alpha_short < 1/2.
+
+    One (E,) float64 array where the lengths and the two reaches took three (tray_bottom
+    diag/40: 5.5 k fresh pages -> 1.8 k)."""
     n = starts.shape[0]
-    lengths = np.empty(n)
-    start_reach = np.empty(n)
-    end_reach = np.empty(n)
+    distance = np.empty(n)
+    violated = np.empty(n, dtype=np.int8)
     for e in nb.prange(n):
-        d0 = coords[ends[e], 0] - coords[starts[e], 0]
-        d1 = coords[ends[e], 1] - coords[starts[e], 1]
-        d2 = coords[ends[e], 2] - coords[starts[e], 2]
-        length = 0.0
-        for i in range(3):
-            x = to_space[i, 0] * d0 + to_space[i, 1] * d1 + to_space[i, 2] * d2
-            length += x * x
-        lengths[e] = np.sqrt(length)
-        scale = _edge_spacing(coords, starts[e], ends[e])
-        if scale > 0:
-            long = (d0 != 0) + (d1 != 0) + (d2 != 0) == 2
-            alpha = alpha_long if long else alpha_short
-        else:  # a template edge off the lattices, in a leaf of side 2 g (g: gcd of |d|)
-            alpha = alpha_long
-            g = abs(d0)
-            for c in (abs(d1), abs(d2)):
-                while c:
-                    g, c = c, g % c
-            scale = 2 * g
-        start_reach[e] = alpha * min(1.0, spacing[starts[e]] / scale)
-        end_reach[e] = alpha * min(1.0, spacing[ends[e]] / scale)
-    return lengths, start_reach, end_reach
+        a = starts[e]
+        b = ends[e]
+        f = fracs[e]
+        start_reach, end_reach = _end_reaches(coords, a, b, spacing, alpha_long, alpha_short)
+        violated[e] = 0 if f < start_reach else (1 if 1.0 - f < end_reach else -1)
+        distance[e] = np.inf
+        if violated[e] >= 0:
+            distance[e] = (f if violated[e] == 0 else 1.0 - f) * (_space_length(coords, a, b, to_space) * h)
+    return distance, violated
+
+
+@nb.njit(cache=True, inline="always")
+def _space_length(coords, a, b, to_space):
+    """Length of the lattice segment ab in space units of h: |to_space (coords[b] - coords[a])|."""
+    d0 = coords[b, 0] - coords[a, 0]
+    d1 = coords[b, 1] - coords[a, 1]
+    d2 = coords[b, 2] - coords[a, 2]
+    length = 0.0
+    for i in range(3):
+        x = to_space[i, 0] * d0 + to_space[i, 1] * d1 + to_space[i, 2] * d2
+        length += x * x
+    return np.sqrt(length)
+
+
+@nb.njit(cache=True, inline="always")
+def _end_reaches(coords, a, b, spacing, alpha_long, alpha_short):
+    """Warp reach (as fractions of the edge) of the ends a and b of a cut edge (see
+    warp_targets): alpha of the edge's kind, times the finest spacing at the end over the
+    edge's (1 at most)."""
+    d0 = coords[b, 0] - coords[a, 0]
+    d1 = coords[b, 1] - coords[a, 1]
+    d2 = coords[b, 2] - coords[a, 2]
+    scale = _edge_spacing(coords, a, b)
+    if scale > 0:
+        long = (d0 != 0) + (d1 != 0) + (d2 != 0) == 2
+        alpha = alpha_long if long else alpha_short
+    else:  # a template edge off the lattices, in a leaf of side 2 g (g: gcd of |d|)
+        alpha = alpha_long
+        g = abs(d0)
+        for c in (abs(d1), abs(d2)):
+            while c:
+                g, c = c, g % c
+        scale = 2 * g
+    return alpha * min(1.0, spacing[a] / scale), alpha * min(1.0, spacing[b] / scale)
 
 
 @dataclass(frozen=True)
@@ -240,9 +258,9 @@ def warp_targets(cuts: CutEdges, coords: np.ndarray, h: float, spacing: np.ndarr
     """
     if spacing is None:
         spacing = np.ones(coords.shape[0], dtype=np.int64)
-    lengths, start_reach, end_reach = _edge_reach(coords, cuts.starts, cuts.ends, spacing, LATTICE_TO_SPACE,
-                                                  ALPHA_LONG, ALPHA_SHORT)
-    return _warp(coords.shape[0], cuts.starts, cuts.ends, cuts.fracs, lengths * h, start_reach, end_reach)
+    distance, violated = _violations(coords, cuts.starts, cuts.ends, cuts.fracs, spacing, LATTICE_TO_SPACE, float(h),
+                                     ALPHA_LONG, ALPHA_SHORT)
+    return _warp(coords.shape[0], cuts.starts, cuts.ends, distance, violated)
 
 
 def _prism_triangulations() -> np.ndarray:
