@@ -319,17 +319,20 @@ def test_warped_moves_the_warped_vertices_onto_their_cut_points_and_appends_the_
 
 
 def _check_cut_edges(tets, inside, coords):
-    """collect_cut_edges against the dict twin, and its table finds every edge's number."""
-    starts, ends, dirs, first, last, partner, edge = collect_cut_edges(tets, inside, coords)
+    """collect_cut_edges against the dict twin, and its table finds every edge's number: each
+    edge is on the chain of its smaller end, and each chain holds only that end's edges."""
+    starts, ends, dirs, head, upper, chain = collect_cut_edges(tets, inside, coords)
     want = naive_cut_edges(tets, inside, coords)
     assert np.array_equal(starts, want[0]) and np.array_equal(ends, want[1]) and np.array_equal(dirs, want[2])
-    assert first.shape == (coords.shape[0] + 1,) and last.shape == (coords.shape[0],)
-    used = np.concatenate([np.arange(a, b) for a, b in zip(first[:-1], last)] + [np.zeros(0, dtype=np.int64)])
-    assert np.array_equal(np.sort(edge[used]), np.arange(starts.size))
-    for e, (p, q) in enumerate(zip(starts.tolist(), ends.tolist())):
-        a, b = min(p, q), max(p, q)
-        slots = np.flatnonzero(partner[first[a]:last[a]] == b)
-        assert slots.size == 1 and edge[first[a] + slots[0]] == e
+    assert head.shape == (coords.shape[0],) and upper.shape == chain.shape == starts.shape
+    on_chain = []
+    for a in range(coords.shape[0]):
+        s = head[a]
+        while s >= 0:
+            assert min(starts[s], ends[s]) == a and upper[s] == max(starts[s], ends[s])
+            on_chain.append(s)
+            s = chain[s]
+    assert np.array_equal(np.sort(on_chain), np.arange(starts.size))
     return dirs
 
 

@@ -62,29 +62,40 @@ def mixed_rows(ids, classes):
 TET_CHUNKS = 64
 
 
-@nb.njit(cache=True)
 def collect_cut_edges(tets, inside, coords):
     """Unique lattice edges of tets whose ends differ in class (tets of one class are skipped:
     gathering the others first wrote 16 bytes a tet to fresh pages, fea_part diag/40 3.5 k
     page faults).
 
     Returns (starts (E,) vertex ids, ends (E,), directions (E,) index into EDGE_DIRECTIONS,
-    then the lookup table (first, last, partner, edge): the edges whose smaller end is a are
-    partner[first[a]:last[a]] with indices edge[...]); end - start = EDGE_DIRECTIONS[direction]
-    for the unit lattice edges, whose ends are ordered so; direction -1 for other edges (of
-    coarser lattices or transition templates).  Edges are numbered in the order the tets
-    first hold them; last is first[1:].
+    then the lookup table (head, upper, chain): the edges whose smaller end is a are
+    head[a], chain[head[a]], ... down to -1, and upper[e] is the larger end of edge e
+    (_edge_of); end - start = EDGE_DIRECTIONS[direction] for the unit lattice edges, whose
+    ends are ordered so; direction -1 for other edges (of coarser lattices or transition
+    templates).  Edges are numbered in the order the tets first hold them.
 
     Duplicates are found by chaining each edge to the previous edge with the same smaller
-    end (a hash table whose buckets are the vertices), so nothing is sized by the tet-edge
-    occurrences (each edge is in 4-6 tets): bucketing the occurrences by a counting sort
-    first took twice as long, half of it first-touch page faults (fea_part diag/40: 62 -> 35
-    ms standalone).  The table is then a counting sort of the edges by their smaller end.
+    end (a hash table whose buckets are the vertices), and those chains are the lookup
+    table, so nothing is sized by the tet-edge occurrences (each edge is in 4-6 tets).
+    Bucketing the occurrences by a counting sort first took twice as long, half of it
+    first-touch page faults (fea_part diag/40: 62 -> 35 ms standalone); a counting sort of
+    the edges by smaller end for the table took tray_bottom diag/40 three (E,) arrays more.
     """
+    if coords.shape[0] >= 1 << 31 or 4 * tets.shape[0] >= 1 << 31:
+        raise ValueError(f"collect_cut_edges chains hold int32: at most 2**31 vertices and 2**29 tets, "
+                         f"len(coords) = {coords.shape[0]}, len(tets) = {tets.shape[0]}")
+    lower, upper, chain, head = _chain_cut_edges(tets, inside, coords.shape[0])
+    starts, ends, dirs = _oriented_edges(lower, upper, coords)
+    return starts, ends, dirs, head, upper, chain
+
+
+@nb.njit(cache=True)
+def _chain_cut_edges(tets, inside, n_vertices):
+    """The distinct mixed edges in order of first occurrence, (lower (E,) int32: the smaller
+    end a, or -1 - a where the first tet holding the edge lists its larger end first; upper
+    (E,) int32: the larger end; chain (E,) int32 and head (V,) int32: collect_cut_edges'
+    lookup table).  One serial pass: its numbering is the order of the tets."""
     m = tets.shape[0]
-    n_vertices = coords.shape[0]
-    if n_vertices >= np.int64(1) << 31 or 4 * m >= np.int64(1) << 31:
-        raise ValueError("collect_cut_edges chains hold int32: at most 2**31 vertices and 2**29 tets")
     head = np.full(n_vertices, -1, dtype=np.int32)
     # A tet has at most 4 edges whose ends differ.  Only the pages written are touched.
     lower = np.empty(4 * m, dtype=np.int32)
@@ -101,26 +112,28 @@ def collect_cut_edges(tets, inside, coords):
                 continue
             a = min(p, q)
             b = max(p, q)
-            s = head[a]
-            while s >= 0 and upper[s] != b:
-                s = chain[s]
-            if s >= 0:
+            if _edge_of(head, upper, chain, a, b) >= 0:
                 continue
-            # -1 - a: the first tet holding the edge lists its larger end first (the
-            # orientation below depends on that order for other than lattice edges).
             lower[n] = a if p < q else -1 - a
             upper[n] = b
             chain[n] = head[a]
             head[a] = n
             n += 1
-    first = np.zeros(n_vertices + 1, dtype=np.int64)
+    return lower[:n], upper[:n], chain[:n], head
+
+
+@nb.njit(cache=True, parallel=True)
+def _oriented_edges(lower, upper, coords):
+    """starts, ends, directions (E,) int64 of collect_cut_edges from _chain_cut_edges' ends:
+    each edge from the end its vector points away from when that vector has no negative
+    component, else from the end its first tet lists first."""
+    n = lower.shape[0]
     starts = np.empty(n, dtype=np.int64)
     ends = np.empty(n, dtype=np.int64)
     dirs = np.empty(n, dtype=np.int64)
-    for i in range(n):
+    for i in nb.prange(n):
         a = lower[i]
-        p, q = (a, upper[i]) if a >= 0 else (upper[i], -1 - a)
-        first[min(p, q) + 1] += 1
+        p, q = (np.int64(a), np.int64(upper[i])) if a >= 0 else (np.int64(upper[i]), np.int64(-1 - a))
         dx = coords[q, 0] - coords[p, 0]
         dy = coords[q, 1] - coords[p, 1]
         dz = coords[q, 2] - coords[p, 2]
@@ -131,26 +144,16 @@ def collect_cut_edges(tets, inside, coords):
         starts[i] = p
         ends[i] = q
         dirs[i] = _DIRECTION_OF_BITS[bits3] if _lattice_step(dx, dy, dz, 1) else -1
-    for v in range(n_vertices):
-        first[v + 1] += first[v]
-    fill = first[:-1].copy()
-    partner = np.empty(n, dtype=np.int64)
-    edge = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        a = lower[i] if lower[i] >= 0 else -1 - lower[i]
-        partner[fill[a]] = upper[i]
-        edge[fill[a]] = i
-        fill[a] += 1
-    return starts, ends, dirs, first, first[1:], partner, edge
+    return starts, ends, dirs
 
 
 @nb.njit(cache=True, inline="always")
-def _edge_slot(first, last, partner, a, b):
-    """Slot of the edge (a, b), a < b, in a collect_cut_edges table, or -1."""
-    for s in range(first[a], last[a]):
-        if partner[s] == b:
-            return s
-    return -1
+def _edge_of(head, upper, chain, a, b):
+    """Number of the edge (a, b), a < b, in collect_cut_edges' table, or -1."""
+    s = head[a]
+    while s >= 0 and upper[s] != b:
+        s = chain[s]
+    return s
 
 
 @nb.njit(cache=True)
@@ -383,8 +386,8 @@ def _quad_first_diagonal(coords, a, b, e):
 
 @nb.njit(cache=True, inline="always")
 def _cut_id(table, n_lattice, p, q):
-    first, last, partner, edge = table
-    return n_lattice + edge[_edge_slot(first, last, partner, min(p, q), max(p, q))]
+    head, upper, chain = table
+    return n_lattice + _edge_of(head, upper, chain, min(p, q), max(p, q))
 
 
 @nb.njit(cache=True, inline="always")
