@@ -142,6 +142,20 @@ def test_band_cells_meet_the_surface_at_the_level_asked(seed):
     assert inside.any(axis=1).all()
     # Asked deeper than any cell splits: levels reach coarse + 2 where a triangle passes the ask.
     assert set(np.unique(levels)) <= {coarse, coarse + 1, coarse + 2}
+    # The slow twin: in each coarse surface cell, every cell of the level asked there, tested
+    # against every triangle.
+    want = set()
+    for (cell,) in (_cells(np.array([k]), frame, coarse) for k in buckets.keys):
+        level = asked.get(tuple(int(v) for v in cell), coarse)
+        side = 1 << (frame.levels - level)
+        per = coarse_side // side
+        for sub in np.ndindex(per, per, per):
+            anchor = np.array(cell) * coarse_side + np.array(sub) * side
+            if any(triangle_meets_cube(t, anchor, side) for t in tris):
+                want.add((level, *(int(v) for v in anchor)))
+    got = {(int(level), *(int(v) for v in np.array(cell) << (frame.levels - level)))
+           for key, level in zip(keys, levels) for (cell,) in [_cells(np.array([key]), frame, level)]}
+    assert got == want
 
 
 def _bucketed_sphere(h, coarser):

@@ -124,27 +124,23 @@ def band_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bit
 
     buckets: face_buckets of wanted.coarse_level (its keys are the coarse surface cells).  A
     cell asked finer splits into the children that meet one of the triangles of its coarse
-    cell (surface_cells, same margin), down to the level asked for.  fine: the finer surface
-    cells found so far in this frame, extended here (default: a new, empty one).
+    cell (surface_cells, same margin), down to the level asked for: these are the cells of
+    that level inside it that meet one of those triangles, since a cell's widened box holds
+    its children's, so each coarse cell's cells are found at its asked level alone (tray_bottom
+    diag/40 asks three levels down everywhere: the two levels between took 30 % of the tests).
+    fine: the finer surface cells found so far in this frame, extended here (default: a new,
+    empty one).
     """
     coarse = wanted.coarse_level
     fine = FineSurfaceCells() if fine is None else fine
     keys = buckets.keys
     asked = wanted.level_of(keys)
-    out_keys, out_levels = [], []
-    level = coarse
-    while True:
-        split = asked > level
-        out_keys.append(keys[~split])
-        out_levels.append(np.full(int((~split).sum()), level, dtype=np.int8))
-        if not split.any():
-            break
-        parents = keys[split]
-        level += 1
-        met = _fine_surface_cells(frame, snapped, faces, snap_bits, buckets, fine, level,
-                                  sorted_unique(ancestor_keys(parents, coarse)))
-        keys = met[octants_in_cells(met, parents, level - 1)]
-        asked = wanted.level_of(ancestor_keys(keys, coarse))
+    whole = asked <= coarse
+    out_keys, out_levels = [keys[whole]], [np.full(int(whole.sum()), coarse, dtype=np.int8)]
+    for level in np.unique(asked[~whole]).tolist():
+        met = _fine_surface_cells(frame, snapped, faces, snap_bits, buckets, fine, level, keys[asked == level])
+        out_keys.append(met)
+        out_levels.append(np.full(met.shape[0], level, dtype=np.int8))
     keys = np.concatenate(out_keys)
     levels = np.concatenate(out_levels)
     order = np.argsort(keys, kind="stable")
