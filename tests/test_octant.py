@@ -76,6 +76,24 @@ def test_sorted_unique_matches_numpy_unique(seed):
     assert np.array_equal(octant.sorted_unique(values), np.unique(values))
     keys = octant.morton_keys(rng.integers(0, 1 << 10, size=(200, 3)))
     assert np.array_equal(octant.sorted_unique(np.concatenate([keys, keys[::3]])), np.unique(keys))
+    # Input already ascending (repeats kept) takes the path without a sort, and is not aliased.
+    ordered = np.sort(np.concatenate([keys, keys[::3]]))
+    out = octant.sorted_unique(ordered)
+    assert np.array_equal(out, np.unique(keys)) and not np.shares_memory(out, ordered)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_is_ascending_matches_its_definition(seed):
+    rng = np.random.default_rng(seed)
+    cases = [np.zeros(0, dtype=np.int64), np.array([7]), np.full(5, 3), np.arange(9), np.arange(9)[::-1].copy()]
+    for _ in range(50):
+        values = np.sort(rng.integers(-20, 20, size=int(rng.integers(2, 40))))
+        if rng.random() < 0.5:  # one swap of two positions
+            i, j = rng.integers(0, values.size, 2)
+            values[[i, j]] = values[[j, i]]
+        cases.append(values)
+    for values in cases:
+        assert octant.is_ascending(values) == all(values[i] <= values[i + 1] for i in range(values.size - 1))
 
 
 @pytest.mark.parametrize("seed", range(4))
