@@ -209,7 +209,7 @@ def _number_points(table, bits, bricks, box_lo, directory, points, start, coords
     """Number points[start:] (P, 3) in order, each new one as the next id, until the table
     has no room for another: returns (first point not numbered, count).
 
-    This and the two kernels below never reassign the table: _number_vertices grows it between
+    This and the two kernels below never reassign the table: their callers grow it between
     calls.  (Reassigned in the loop, even by a no-op, it cost numba's reference counting and
     reloads: 2.4 x the time of a loop that does not.)"""
     for i in range(start, points.shape[0]):
@@ -227,7 +227,7 @@ def _number_points(table, bits, bricks, box_lo, directory, points, start, coords
 @nb.njit(cache=True)
 def _number_corners(table, bits, bricks, box_lo, directory, anchors, sides, start, corner_ids, coords, count):
     """Number the corners of leaves start.. into corner_ids (L, 8), as _number_points.  The
-    lookup is spelled out here and in _number_splits: an inlined helper taking the arrays
+    lookup is spelled out here and in _number_face_centres: an inlined helper taking the arrays
     made this loop 1.6-2.6x slower."""
     for i in range(start, anchors.shape[0]):
         if not _has_room(table, count + 8):
@@ -244,28 +244,28 @@ def _number_corners(table, bits, bricks, box_lo, directory, anchors, sides, star
 
 
 @nb.njit(cache=True)
-def _number_splits(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, split_row, split_ids,
-                   eager, phase, rule, start, coords, count):
-    """Number the split points of the coarse leaves start.. that phase 0 (eager leaves, by the
-    eager rule) or 1 (the others, by the minimal rule) handles, as _number_points."""
+def _number_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, split_row, split_ids,
+                         eager, phase, rule, start, coords, count):
+    """Number the face centres (split points 12..17) of the coarse leaves start.. that phase 0
+    (eager leaves, by the eager rule) or 1 (the others, by the minimal rule) handles, as
+    _number_points; the rules read the leaf's edge midpoints (_edge_midpoint_ids)."""
     for i in range(start, anchors.shape[0]):
         r = split_row[i]
         if r < 0 or eager[i] != (phase == 0):
             continue
-        if not _has_room(table, count + 18):
+        if not _has_room(table, count + 6):
             return i, count
         half = sides[i] // 2
-        for p in range(18):
+        for p in range(12, 18):
             x = anchors[i, 0] + half * split_offsets[p, 0]
             y = anchors[i, 1] + half * split_offsets[p, 1]
             z = anchors[i, 2] + half * split_offsets[p, 2]
             split = False
-            if p >= 12:
-                for g in range(rule.shape[1]):
-                    group = True
-                    for e in rule[p - 12, g]:
-                        group &= split_ids[r, e] >= 0
-                    split |= group
+            for g in range(rule.shape[1]):
+                group = True
+                for e in rule[p - 12, g]:
+                    group &= split_ids[r, e] >= 0
+                split |= group
             vid, new = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, count, split)
             if new:
                 count = _add(coords, count, x, y, z)
@@ -273,27 +273,34 @@ def _number_splits(table, bits, bricks, box_lo, directory, anchors, sides, split
     return anchors.shape[0], count
 
 
-@nb.njit(cache=True)
-def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory, split_offsets, eager, eager_rule,
-                     minimal_rule):
-    """Vertex ids of leaf corners (L, 8) int32, of the split points of leaves with side >= 2
-    (split_row (L,) int64 row or -1, split_ids (C, 18) int32, -1 where not a vertex) and the
-    lattice coordinates (V, 3) of the vertices.
+@nb.njit(cache=True, parallel=True)
+def _edge_midpoint_ids(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, coarse, split_ids):
+    """split_ids[r, 0:12]: the ids of the cube-edge midpoints of leaf coarse[r], -1 where not
+    a vertex.  A midpoint is a vertex only as a corner of finer leaves (never a face centre:
+    in a 2:1 tree those lie at odd multiples of half a side in two coordinates, midpoints in
+    one), so the table after the corners has them all and is only read, in parallel."""
+    for r in nb.prange(coarse.shape[0]):
+        i = coarse[r]
+        half = sides[i] // 2
+        for p in range(12):
+            x = anchors[i, 0] + half * split_offsets[p, 0]
+            y = anchors[i, 1] + half * split_offsets[p, 1]
+            z = anchors[i, 2] + half * split_offsets[p, 2]
+            vid, _ = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, -1, False)
+            split_ids[r, p] = vid
 
-    The prefix points (P, 3) get ids 0..P-1; then corners are numbered in leaf order; then the
-    centres of the faces of coarse leaves, first of the leaves marked eager (L,), in order, by
-    eager_rule, then of the others by minimal_rule (rules (6, G, K) as in
-    transitions.FACE_CENTRE_RULES: some group of K face edges all split).  A face centre no rule
-    asks for is still a vertex if it already is one: a corner of finer leaves, or asked for by
-    the eager leaf on the face's other side.
+
+@nb.njit(cache=True)
+def _number_corner_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory, extra):
+    """The prefix points (P, 3) as ids 0..P-1, then the corners of the leaves in leaf order:
+    (table, bits, corner_ids (L, 8) int32, coords with room for extra rows more, count).
     table: an empty vertex table (_vertex_id): the dense index of the box box_lo + 8 * bricks
     through directory (_brick_directory), which then holds every vertex, or hashed with 2**bits
-    rows, grown as it fills.
-    """
+    rows, grown as it fills."""
     n = anchors.shape[0]
     corner_ids = np.empty((n, 8), dtype=np.int32)
     # Room for every prefix point and corner (untouched pages cost nothing).
-    coords = np.empty((8 * n + prefix.shape[0], 3), dtype=np.int64)
+    coords = np.empty((8 * n + prefix.shape[0] + extra, 3), dtype=np.int64)
     count = 0
     done = 0
     while done < prefix.shape[0]:
@@ -304,33 +311,26 @@ def _number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, direct
         table, bits = _with_room(table, bits, count + 8)
         done, count = _number_corners(table, bits, bricks, box_lo, directory, anchors, sides, done, corner_ids,
                                       coords, count)
-    split_row = np.full(n, -1, dtype=np.int64)
-    n_coarse = 0
-    for i in range(n):
-        if sides[i] >= 2:
-            split_row[i] = n_coarse
-            n_coarse += 1
-    split_ids = np.full((n_coarse, 18), -1, dtype=np.int32)
-    if n_coarse:
-        coords = _grow(coords, count, count + 6 * n_coarse)
-    for phase in range(2):
-        rule = eager_rule if phase == 0 else minimal_rule
-        done = 0
-        while done < n:
-            table, bits = _with_room(table, bits, count + 18)
-            done, count = _number_splits(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets,
-                                         split_row, split_ids, eager, phase, rule, done, coords, count)
-    return corner_ids, split_row, split_ids, coords[:count].copy()
+    return table, bits, corner_ids, coords, count
 
 
 @nb.njit(cache=True)
-def _grow(coords, count, capacity):
-    """coords with its first count rows kept and room for capacity rows."""
-    grown = np.empty((capacity, 3), dtype=np.int64)
-    for i in range(count):  # not a slice assignment: its shape check compiles numba's string formatting (2-3 s)
-        for k in range(3):
-            grown[i, k] = coords[i, k]
-    return grown
+def _number_all_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, split_row,
+                             split_ids, eager, eager_rule, minimal_rule, coords, count):
+    """The face centres of the coarse leaves, first of the leaves marked eager (L,), in order,
+    by eager_rule, then of the others by minimal_rule (rules (6, G, K) as in
+    transitions.FACE_CENTRE_RULES: some group of K face edges all split); returns the
+    vertices' coordinates (V, 3).  A face centre no rule asks for is still a vertex if it
+    already is one: a corner of finer leaves, or asked for by the eager leaf on the face's
+    other side."""
+    for phase in range(2):
+        rule = eager_rule if phase == 0 else minimal_rule
+        done = 0
+        while done < anchors.shape[0]:
+            table, bits = _with_room(table, bits, count + 6)
+            done, count = _number_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets,
+                                               split_row, split_ids, eager, phase, rule, done, coords, count)
+    return coords[:count].copy()
 
 
 @nb.njit(cache=True)
@@ -492,13 +492,22 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     if table is None:  # hashing reads no directory (not even one that did not fit)
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
         table, directory = np.full((1 << bits, 2), _EMPTY, dtype=np.int64), np.zeros(0, dtype=np.int32)
-    # A copy: broadcast_to's view is read-only, and numba compiles _number_vertices again (4-5 s)
+    # A copy: broadcast_to's view is read-only, and numba compiles the numbering kernels again (4-5 s)
     # for a read-only array.
     eager = np.array(np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape))
-    return LeafVertices(*_number_vertices(table, bits, anchors, sides, prefix, box_lo, bricks, directory,
-                                          SPLIT_POINT_OFFSETS,
-                                          eager, FACE_CENTRE_RULES["eager"],
-                                          FACE_CENTRE_RULES["minimal"]))
+    coarse = np.flatnonzero(sides >= 2)
+    split_row = np.full(sides.shape[0], -1, dtype=np.int64)
+    split_row[coarse] = np.arange(coarse.shape[0])
+    table, bits, corner_ids, coords, count = _number_corner_vertices(table, bits, anchors, sides, prefix, box_lo,
+                                                                     bricks, directory, 6 * coarse.shape[0])
+    split_ids = np.empty((coarse.shape[0], 18), dtype=np.int32)
+    # Three kernels, not one: a parallel kernel called from a cached one segfaults when loaded
+    # from the cache (numba issue #8578).
+    _edge_midpoint_ids(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse, split_ids)
+    coords = _number_all_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS,
+                                      split_row, split_ids, eager, FACE_CENTRE_RULES["eager"],
+                                      FACE_CENTRE_RULES["minimal"], coords, count)
+    return LeafVertices(corner_ids, split_row, split_ids, coords)
 
 
 def vertex_spacing(vertices: LeafVertices, sides: np.ndarray) -> np.ndarray:
