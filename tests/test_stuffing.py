@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from paroct import lattice
+from paroct import lattice, stuffing
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _signs, _star_score, _stencil_offsets, _stencils,
-                              _stencils_in_chunks, _warped, collect_cut_edges, restuff, retarget_warps,
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _signs, _star_score,
+                              _stencil_offsets, _stencils, _stencils_in_chunks, _warped, collect_cut_edges, restuff, retarget_warps,
                               stuff, warp_targets)
 from paroct.topology import match_faces
 
@@ -348,6 +348,22 @@ def test_cut_edges_are_the_distinct_mixed_edges_in_order_of_first_occurrence(n_v
     _check_cut_edges(tets.astype(np.int64), inside, coords)
     mixed = inside[tets].any(axis=1) & ~inside[tets].all(axis=1)
     _check_cut_edges(tets[mixed], inside, coords)
+
+
+@pytest.mark.parametrize("n_chunks", [2, 3, 7])
+def test_cut_edges_chained_in_parallel_runs_are_those_of_one_run(n_chunks, monkeypatch):
+    """Runs of tets chained apart and merged: the same edges, order and table as one run, down
+    to runs with no tet or no new edge; through collect_cut_edges too (against the dict twin)."""
+    rng = np.random.default_rng(n_chunks)
+    for n_vertices, n_tets in [(5, 2), (40, 300), (3000, 5000)]:
+        coords = rng.integers(0, 3, (n_vertices, 3))
+        inside = rng.random(n_vertices) < 0.5
+        tets = rng.integers(0, n_vertices, (n_tets, 4)).astype(np.int32)
+        one = _chain_cut_edges(tets, inside, n_vertices, 1)
+        runs = _chain_cut_edges(tets, inside, n_vertices, n_chunks)
+        assert all(np.array_equal(a, b) for a, b in zip(one, runs))
+    monkeypatch.setattr(stuffing, "PARALLEL_CUT_EDGE_TETS", 0)
+    _check_cut_edges(tets, inside, coords)
 
 
 @pytest.mark.parametrize("seed", range(2))
