@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, ancestor_keys, morton_key, octants_in_cells, sorted_lookup, sorted_unique
+from .octant import MAX_LEVEL, morton_key, octants_in_cells, sorted_lookup
 from .octree import (FaceBuckets, balance, faces_meeting_cells, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
