@@ -320,7 +320,7 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int,
     core &= ~lost
     around = np.nonzero(touching(tets, lost))[0]  # every face neighbour of a removed tet
     faces = _faces_after_removal(faces, tets[around], alive[around])
-    tets = tets[alive]
+    tets = np.compress(alive, tets, axis=0)  # 4x a boolean index of (M, 4)
     topology = surface_topology(faces, core.shape[0])
     if topology.bad_vertices:
         raise AssertionError("pinch repair left a non-manifold boundary vertex")
@@ -358,7 +358,7 @@ def _faces_after_removal(faces: np.ndarray, near: np.ndarray, alive: np.ndarray)
     gone = np.sort(dead_faces[across < 0], axis=1)
     gone = np.ascontiguousarray(gone[np.lexsort(gone.T[::-1])])
     exposed = (across >= 0) & alive[np.maximum(across, 0)]
-    return np.concatenate([faces[_faces_not_in(faces, gone)], dead_faces[exposed][:, ::-1]])
+    return np.concatenate([np.compress(_faces_not_in(faces, gone), faces, axis=0), dead_faces[exposed][:, ::-1]])
 
 
 @nb.njit(cache=True)
