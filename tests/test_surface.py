@@ -145,6 +145,14 @@ def _inside_out(v, f, rng):
     return v, f[:, ::-1].copy()
 
 
+@pytest.mark.parametrize("vertices", [np.full((8, 3), "1"), np.zeros((8, 3), dtype=complex),
+                                      np.zeros((8, 3), dtype=object)])
+def test_vertices_that_are_not_real_numbers_are_refused(vertices):
+    faces = _arrays(SOLIDS["cube"]())[1]
+    with pytest.raises(ParoctError, match=f"vertices.dtype = {vertices.dtype}, expected real numbers"):
+        surface_from_arrays(vertices, faces)
+
+
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("break_it,match", [
     (_flip_one, "inconsistently oriented"),

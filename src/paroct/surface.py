@@ -418,6 +418,8 @@ def _check_scale(vertices: np.ndarray, label: str) -> None:
 def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "surface") -> Surface:
     """Validate a triangle surface and build its solid; see load_surface."""
     vertices = np.asarray(vertices)
+    if vertices.dtype.kind not in "iuf":
+        raise ParoctError(f"{label}: vertices.dtype = {vertices.dtype}, expected real numbers")
     if vertices.dtype != np.float32:  # float32 (binary STL) is welded as it is, exactly
         vertices = vertices.astype(np.float64, copy=False)
     faces = np.asarray(faces)
