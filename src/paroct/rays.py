@@ -337,13 +337,10 @@ def _row_order(keys, fracs, faces, written, max_rows):
     only within its row, a few crossings.  The order argsort and _order_cells give (a
     triangle crosses a row's cell once: no ties)."""
     n = written.shape[0]
-    mask = (np.int64(1) << _KEY_BITS) - 1
     lo2 = lo3 = np.int64(1) << 62
     hi2 = hi3 = np.int64(-1)
     for i in range(n):
-        key = keys[written[i]]
-        r2 = key >> (2 * _KEY_BITS)
-        r3 = (key >> _KEY_BITS) & mask
+        r2, r3 = _row_of(keys[written[i]])
         lo2, hi2, lo3, hi3 = min(lo2, r2), max(hi2, r2), min(lo3, r3), max(hi3, r3)
     if n == 0:
         return written.copy()
@@ -353,18 +350,25 @@ def _row_order(keys, fracs, faces, written, max_rows):
         return np.empty(0, dtype=np.int64)
     start = np.zeros(n_rows + 1, dtype=np.int64)
     for i in range(n):
-        key = keys[written[i]]
-        start[((key >> (2 * _KEY_BITS)) - lo2) * width + ((key >> _KEY_BITS) & mask) - lo3 + 1] += 1
+        r2, r3 = _row_of(keys[written[i]])
+        start[(r2 - lo2) * width + r3 - lo3 + 1] += 1
     for r in range(n_rows):
         start[r + 1] += start[r]
     order = np.empty(n, dtype=np.int64)
     for i in range(n):
-        key = keys[written[i]]
-        r = ((key >> (2 * _KEY_BITS)) - lo2) * width + ((key >> _KEY_BITS) & mask) - lo3
+        r2, r3 = _row_of(keys[written[i]])
+        r = (r2 - lo2) * width + r3 - lo3
         order[start[r]] = written[i]
         start[r] += 1
     _order_cells(keys, fracs, faces, order)
     return order
+
+
+@nb.njit(cache=True, inline="always")
+def _row_of(key):
+    """The row (r2, r3) of a crossing's key, each offset by _KEY_OFFSET (its high bits; the low
+    _KEY_BITS are the cell)."""
+    return key >> (2 * _KEY_BITS), (key >> _KEY_BITS) & ((np.int64(1) << _KEY_BITS) - 1)
 
 
 @nb.njit(cache=True)
