@@ -428,3 +428,10 @@ def warp_targets(coords: np.ndarray, starts, ends, fracs, spacing, h: float) -> 
             if t < alpha * min(1.0, spacing[v] / s) and t * length < best[v]:
                 best[v], target[v] = t * length, e
     return target
+
+
+def group_by_vertex(vertices: np.ndarray, owners: np.ndarray) -> list[list[int]]:
+    """For each vertex, the rows of owners (N, K) holding it: column by column, each
+    column's rows in order."""
+    return [[r for c in range(owners.shape[1]) for r in range(owners.shape[0]) if owners[r, c] == v]
+            for v in vertices]

@@ -15,12 +15,13 @@ from paroct import lattice, stuffing
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _signs, _star_score,
-                              _stencil_offsets, _stencils, _stencils_in_chunks, _warped, collect_cut_edges, restuff, retarget_warps,
-                              stuff, warp_targets)
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _shifted_offsets,
+                              _signs, _splice, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
+                              collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
 from paroct.topology import match_faces
 
 from .naive import cut_edges as naive_cut_edges
+from .naive import group_by_vertex as naive_group_by_vertex
 from .naive import star_violation
 from .naive import warp_targets as naive_warp_targets
 from .test_grading import _random_balanced_tree
@@ -431,6 +432,60 @@ def test_restuff_gives_what_stuff_gives_and_says_what_it_kept(seed):
         assert through.any() and np.all(kept[through] < 0)
         assert np.count_nonzero(kept < 0) < 0.5 * len(got)
         targets, out, offsets = new, got, got_offsets
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_group_by_vertex_against_naive(seed):
+    """Rows grouped by the marked vertices they hold, column by column (the order retarget_warps
+    tries a vertex's cut edges in: those it starts, then those it ends), as the slow twin;
+    repeated vertices in a row, no marked vertex and no rows included."""
+    rng = np.random.default_rng(900 + seed)
+    n, k, n_vertices = [(0, 4, 5), (1, 2, 3), (40, 4, 30), (200, 2, 50), (300, 4, 10), (50, 3, 1)][seed]
+    owners = rng.integers(0, n_vertices, (n, k)).astype(np.int32 if k == 4 else np.int64)
+    vertices = np.unique(rng.choice(n_vertices, size=min(n_vertices, 1 + seed * 3))).astype(np.int64)
+    if seed == 1:
+        vertices = vertices[:0]
+    marked = np.zeros(n_vertices, dtype=bool)
+    marked[vertices] = True
+    first, grouped = _group_by_vertex(vertices, marked, owners)
+    assert first.shape == (vertices.size + 1,) and first[0] == 0
+    got = [grouped[first[i]:first[i + 1]].tolist() for i in range(vertices.size)]
+    assert got == naive_group_by_vertex(vertices, owners)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_splice_against_concatenation(seed):
+    """_shifted_offsets and _splice give lattice tet t's new tets where the rows stuffed again
+    replace theirs (counts changed, to none included), as concatenating each lattice tet's
+    tets in order does; kept names the old index of every copied tet.  Rows at the ends, no
+    rows, and fewer lattice tets than chunks included."""
+    rng = np.random.default_rng(1000 + seed)
+    n = [0, 3, 50, 1000, 5000][seed]
+    counts = rng.integers(0, 4, n)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    out = rng.integers(0, 10**6, (offsets[-1], 4)).astype(np.int32)
+    rows = np.unique(np.concatenate([rng.choice(n, size=min(n, 7)) if n else [], [0, n - 1] if n > 1 else []]))
+    rows = rows.astype(np.int64)
+    again_counts = rng.integers(0, 4, rows.size)
+    again_offsets = np.concatenate([[0], np.cumsum(again_counts)]).astype(np.int64)
+    again = rng.integers(-10**6, 0, (again_offsets[-1], 4)).astype(np.int32)
+    pieces, kept_pieces = [], []
+    for t in range(n):
+        j = np.searchsorted(rows, t)
+        if j < rows.size and rows[j] == t:
+            pieces.append(again[again_offsets[j]:again_offsets[j + 1]])
+            kept_pieces.append(np.full(again_counts[j], -1))
+        else:
+            pieces.append(out[offsets[t]:offsets[t + 1]])
+            kept_pieces.append(np.arange(offsets[t], offsets[t + 1]))
+    want = np.concatenate(pieces) if pieces else np.empty((0, 4), dtype=np.int32)
+    new_offsets = _shifted_offsets(offsets, rows, again_offsets)
+    np.testing.assert_array_equal(new_offsets, np.concatenate([[0], np.cumsum([len(p) for p in pieces])]))
+    got = np.empty((new_offsets[-1], 4), dtype=np.int32)
+    kept = np.empty(got.shape[0], dtype=np.int64)
+    _splice(out, offsets, again, again_offsets, rows, new_offsets, got, kept)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(kept, np.concatenate(kept_pieces) if kept_pieces else np.empty(0))
 
 
 def test_retarget_warps_mends_needles_and_keeps_the_bound_first():

@@ -728,14 +728,16 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     for _ in range(RETARGET_PASSES):
         if not (is_bad.any() or is_needle.any()):
             break
+        # points follow the new warps in place: restuff takes them as they are.
         new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
-                                              np.flatnonzero(is_bad | is_needle), NEEDLE_RATIO, offsets=offsets)
+                                              np.flatnonzero(is_bad | is_needle), NEEDLE_RATIO, offsets=offsets,
+                                              points=points)
         if not changed:
             break
         # Only the lattice tets around the vertices that warp elsewhere change: stuff and
         # measure those again, keep the rest.
         points, out_tets, kept, offsets = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
-                                                  new_targets, offsets=offsets, flat_ok=True)
+                                                  new_targets, offsets=offsets, flat_ok=True, points=points)
         targets = new_targets
         again = np.flatnonzero(kept < 0)
         is_bad, is_needle = is_bad[kept], is_needle[kept]

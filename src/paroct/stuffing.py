@@ -729,9 +729,11 @@ def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
 
 def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
             targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *, offsets: np.ndarray,
-            flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            flat_ok: bool = False, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """stuff(..., new_targets), given out, offsets = stuff(..., targets)[1:]: only the lattice
     tets with a vertex whose warp changed are stuffed again, the others' tets are copied.
+    points: stuff's points for new_targets if the caller has them (retarget_warps updates
+    stuff's in place), else computed.
 
     Returns (points, tets (M, 4) int32, kept (M,) int64, offsets): the same points, tets and
     offsets as stuff with new_targets, and for each tet its index in out, or -1 if it was
@@ -741,40 +743,71 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     if offsets.shape[0] != tets.shape[0] + 1 or offsets[-1] != out.shape[0]:
         raise ValueError(f"len(offsets) = {offsets.shape[0]} ending at {offsets[-1]}, but {tets.shape[0]} lattice tets "
                          f"stuffed into len(out) = {out.shape[0]}")
-    points, signs = _warped(lattice_points, inside, cuts, new_targets)
+    if points is None:
+        points = _warped_points(lattice_points, cuts.points, new_targets)
+    signs = _signs(inside, new_targets)
     rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
                                         flat_ok)
-    counts = np.diff(offsets)
-    counts[rows] = np.diff(again_offsets)
-    new_offsets = np.zeros(tets.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts, out=new_offsets[1:])
-    again_row = np.full(tets.shape[0], -1, dtype=np.int64)
-    again_row[rows] = np.arange(rows.shape[0])
+    new_offsets = _shifted_offsets(offsets, rows, again_offsets)
     new_out = np.empty((int(new_offsets[-1]), 4), dtype=np.int32)
     kept = np.empty(new_out.shape[0], dtype=np.int64)
-    _splice(out, offsets, again, again_offsets, again_row, new_offsets, new_out, kept)
+    _splice(out, offsets, again, again_offsets, rows, new_offsets, new_out, kept)
     return points, new_out, kept, new_offsets
 
 
 @nb.njit(cache=True, parallel=True)
-def _splice(out, old_offsets, again, again_offsets, again_row, offsets, new_out, kept):
-    """new_out[offsets[t]:offsets[t + 1]]: lattice tet t's tets, from again if it was stuffed
-    again (again_row[t] >= 0), else from out; kept: their index in out, or -1."""
-    for t in nb.prange(offsets.shape[0] - 1):
-        k = offsets[t]
-        j = again_row[t]
-        n = offsets[t + 1] - k
-        for i in range(n):
-            if j < 0:
-                src = old_offsets[t] + i
-                kept[k + i] = src
-                for c in range(4):
-                    new_out[k + i, c] = out[src, c]
-            else:
-                kept[k + i] = -1
-                for c in range(4):
-                    new_out[k + i, c] = again[again_offsets[j] + i, c]
+def _shifted_offsets(offsets, rows, again_offsets):
+    """Offsets (T + 1,) of the lattice tets' stencils once lattice tets rows (sorted) have
+    again_offsets' counts instead of their own; in chunks of lattice tets, each starting from
+    the shift of the rows before it."""
+    n = offsets.shape[0] - 1
+    shift = np.zeros(rows.shape[0] + 1, dtype=np.int64)  # shift[j]: what rows[:j] add
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        shift[j + 1] = shift[j] + (again_offsets[j + 1] - again_offsets[j]) - (offsets[r + 1] - offsets[r])
+    new = np.empty(n + 1, dtype=np.int64)
+    n_chunks = min(n, TET_CHUNKS)
+    for c in nb.prange(n_chunks):
+        t0 = c * n // n_chunks
+        j = np.searchsorted(rows, t0)
+        for t in range(t0, (c + 1) * n // n_chunks):
+            new[t] = offsets[t] + shift[j]
+            if j < rows.shape[0] and rows[j] == t:
+                j += 1
+    new[n] = offsets[n] + shift[rows.shape[0]]
+    return new
+
+
+@nb.njit(cache=True, parallel=True)
+def _splice(out, old_offsets, again, again_offsets, rows, offsets, new_out, kept):
+    """new_out[offsets[t]:offsets[t + 1]]: lattice tet t's tets, from again if it is rows[j]
+    (stuffed again: again[again_offsets[j]:again_offsets[j + 1]]), else from out; kept: their
+    index in out, or -1.  In chunks of lattice tets: the kept ones between two rows are one
+    block of out."""
+    n = offsets.shape[0] - 1
+    n_chunks = min(n, TET_CHUNKS)
+    for c in nb.prange(n_chunks):
+        t = c * n // n_chunks
+        end = (c + 1) * n // n_chunks
+        j = np.searchsorted(rows, t)
+        while t < end:
+            stop = min(end, rows[j]) if j < rows.shape[0] else end
+            src = old_offsets[t]
+            dst = offsets[t]
+            for i in range(old_offsets[stop] - src):
+                kept[dst + i] = src + i
+                for k in range(4):
+                    new_out[dst + i, k] = out[src + i, k]
+            t = stop
+            if t < end:  # t == rows[j]
+                dst = offsets[t]
+                for i in range(again_offsets[j + 1] - again_offsets[j]):
+                    kept[dst + i] = -1
+                    for k in range(4):
+                        new_out[dst + i, k] = again[again_offsets[j] + i, k]
+                j += 1
+                t += 1
 
 
 @nb.njit(cache=True)
@@ -858,14 +891,28 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
             break
 
 
-def _group_by_vertex(vertices: np.ndarray, marked: np.ndarray, owners: np.ndarray,
-                     items: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The items (N,) whose owner (N,) vertex is marked, grouped by that vertex's rank in
-    vertices (sorted): group i is grouped[first[i]:first[i + 1]].  Returns (first, grouped)."""
-    keep = marked[owners]
-    rank = np.searchsorted(vertices, owners[keep])
-    order = np.argsort(rank, kind="stable")
-    return np.searchsorted(rank[order], np.arange(vertices.shape[0] + 1)), items[keep][order]
+@nb.njit(cache=True)
+def _group_by_vertex(vertices, marked, owners):
+    """Rows of owners (N, K) grouped by the marked vertices they hold (vertices: the marked
+    ones, sorted): group i, the rows holding vertices[i], is grouped[first[i]:first[i + 1]],
+    column by column, each column's rows in order (count, prefix sum, fill).  Returns
+    (first (G + 1,), grouped) int64."""
+    first = np.zeros(vertices.shape[0] + 1, dtype=np.int64)
+    for c in range(owners.shape[1]):
+        for r in range(owners.shape[0]):
+            if marked[owners[r, c]]:
+                first[np.searchsorted(vertices, owners[r, c]) + 1] += 1
+    for i in range(vertices.shape[0]):
+        first[i + 1] += first[i]
+    fill = first[:-1].copy()
+    grouped = np.empty(first[-1], dtype=np.int64)
+    for c in range(owners.shape[1]):
+        for r in range(owners.shape[0]):
+            if marked[owners[r, c]]:
+                i = np.searchsorted(vertices, owners[r, c])
+                grouped[fill[i]] = r
+                fill[i] += 1
+    return first, grouped
 
 
 #: Passes over the candidate vertices retarget_warps makes at most.
@@ -874,7 +921,7 @@ RETARGET_SWEEPS = 4
 
 def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
                    cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0, *,
-                   offsets: np.ndarray) -> tuple[np.ndarray, int]:
+                   offsets: np.ndarray, points: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Mend stuffed tets outside DIHEDRAL_BOUND (and needles: 3r/R below min_ratio) by choosing
     other warps near them.
 
@@ -886,23 +933,26 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     angle least outside the bound is kept (_retarget), among equals the one with the fattest
     star by 3r/R.  Tets the warps would fold count as outside.  Arguments as for stuff, and
     bad: indices of the bad tets (outside the bound or needles) in stuff's output, offsets:
-    stuff's (where each lattice tet's tets start in it).
+    stuff's (where each lattice tet's tets start in it); points: stuff's points, if the caller
+    has them, which are then updated in place to the new warps (restuff takes them), saving a
+    copy of (V + E, 3); else they are computed.
     Returns (new warp targets (V,), how many vertices warp elsewhere); the caller stuffs again
     and measures: this is a search, it certifies nothing.
     """
     tets = np.ascontiguousarray(tets)
     new = targets.copy()
-    points, signs = _warped(lattice_points, inside, cuts, new)
+    if points is None:
+        points = _warped_points(lattice_points, cuts.points, targets)
+    signs = _signs(inside, targets)
     owners = np.searchsorted(offsets, bad, side="right") - 1  # the lattice tet each came from
     vertices = np.unique(tets[owners].ravel()).astype(np.int64)
     marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
     rows = np.flatnonzero(touching(tets, marked))
-    star_first, stars = _group_by_vertex(vertices, marked, np.take(tets, rows, axis=0).astype(np.int64).ravel(),
-                                         np.repeat(rows, 4))
-    n_cuts = cuts.starts.shape[0]
-    option_first, options = _group_by_vertex(vertices, marked, np.concatenate([cuts.starts, cuts.ends]),
-                                             np.tile(np.arange(n_cuts, dtype=np.int64), 2))
+    star_first, star_rows = _group_by_vertex(vertices, marked, np.take(tets, rows, axis=0))
+    stars = rows[star_rows]
+    # A vertex's options: the cut edges it starts, then those it ends, each in order.
+    option_first, options = _group_by_vertex(vertices, marked, np.stack((cuts.starts, cuts.ends), axis=1))
     _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points, inside,
               coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio), RETARGET_SWEEPS)
     return new, int(np.count_nonzero(new != targets))
