@@ -10,7 +10,7 @@ from paroct import rays
 from paroct.errors import ParoctError
 from paroct.frame import LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
 from paroct.lattice import leaf_tets
-from paroct.mesher import _cut_points, mesh
+from paroct.mesher import _compact, _cut_points, _used_ids, mesh
 from paroct.octree import octant_lattice_anchors, uniform_leaves
 from paroct.quality import tet_dihedral_angles, tet_quality
 from paroct.stuffing import PRISM_TETS
@@ -425,3 +425,19 @@ def test_cut_points_are_the_frames_space_points_along_the_edges_rounded_alike(n_
     want = frame.to_space(coords[starts] + fracs[:, None] * (coords[ends] - coords[starts]))
     got = _cut_points(coords, starts, ends, fracs, frame.origin, float(frame.h), LATTICE_TO_SPACE)
     assert got.shape == (n_edges, 3) and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("n_points, n_tets", [(0, 0), (5, 0), (1, 1), (70, 3), (1000, 40), (5000, 3000)])
+def test_compact_keeps_the_used_points_in_order(n_points, n_tets):
+    """_used_ids numbers the points the tets use in point order, and
+    _compact drops the others: the same points and tets as numpy's unique and searchsorted."""
+    rng = np.random.default_rng(n_points + n_tets)
+    tets = rng.integers(0, max(n_points, 1), (n_tets, 4)).astype(np.int32)
+    points = rng.random((n_points, 3))
+    used = np.unique(tets)
+    want = np.full(n_points, -1)
+    want[used] = np.arange(used.size)
+    np.testing.assert_array_equal(_used_ids(tets, n_points), want)
+    got_points, got_tets = _compact(points, tets)
+    np.testing.assert_array_equal(got_points, points[used])
+    np.testing.assert_array_equal(got_tets, np.searchsorted(used, tets))
