@@ -15,8 +15,8 @@ from paroct import lattice, stuffing
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _shifted_offsets,
-                              _signs, _splice, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _move_kept,
+                              _place_again, _shift_offsets, _signs, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
                               collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
 from paroct.topology import match_faces
 
@@ -405,14 +405,17 @@ def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_restuff_gives_what_stuff_gives_and_says_what_it_kept(seed):
-    """Stuffing again only around the vertices whose warps changed gives the very tets stuff
-    gives with the new warps; kept names the unchanged tets' old indices."""
+def test_restuff_gives_what_stuff_gives_and_keeps_the_flags_of_the_tets_it_kept(seed):
+    """Stuffing again only around the vertices whose warps changed gives the very tets and
+    offsets stuff gives with the new warps, in place when they are not more; the kept tets
+    keep their flags, the ones stuffed again (named by again) get 0."""
     rng = np.random.default_rng(500 + seed)
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
     coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
     points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
-    for _ in range(3):
+    flags = rng.integers(1, 256, out.shape[0]).astype(np.uint8)
+    grown = shrunk = 0
+    for _ in range(6):
         new = targets.copy()
         ends = np.concatenate([cuts.starts, cuts.ends])
         for v in rng.choice(ends, 6):  # another cut edge of v, or no warp at all
@@ -422,16 +425,31 @@ def test_restuff_gives_what_stuff_gives_and_says_what_it_kept(seed):
                                             cuts.ends[np.maximum(new, 0)], cuts.starts[np.maximum(new, 0)]), -1)
         new[(new >= 0) & (new[np.maximum(other, 0)] == new)] = -1  # both ends onto one cut point: none
         want_points, want, want_offsets = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
-        got_points, got, kept, got_offsets = restuff(x, coords, tets, inside, cuts, targets, out, new,
-                                                     offsets=offsets, flat_ok=True)
+        before, before_flags, before_offsets = out.copy(), flags.copy(), offsets.copy()
+        got_points, got, again, got_offsets, got_flags = restuff(x, coords, tets, inside, cuts, targets, out, new,
+                                                                 offsets=offsets, flat_ok=True, flags=flags)
         assert np.array_equal(got_points, want_points) and np.array_equal(got, want)
         assert np.array_equal(got_offsets, want_offsets)
-        assert np.array_equal(got[kept >= 0], out[kept[kept >= 0]])
-        # A tet through a vertex whose warp changed was stuffed again; most were kept.
-        through = np.isin(got, np.flatnonzero(new != targets)).any(axis=1)
-        assert through.any() and np.all(kept[through] < 0)
-        assert np.count_nonzero(kept < 0) < 0.5 * len(got)
-        targets, out, offsets = new, got, got_offsets
+        # Flags follow their tets; the tets stuffed again are exactly those through a vertex
+        # whose warp changed, and they are few.
+        changed = np.flatnonzero(new != targets)
+        want_flags, want_again = [], []
+        for t in range(tets.shape[0]):
+            lo, hi = got_offsets[t], got_offsets[t + 1]
+            if np.isin(tets[t], changed).any():
+                want_flags.append(np.zeros(hi - lo, dtype=np.uint8))
+                want_again.append(np.arange(lo, hi))
+            else:
+                assert hi - lo == before_offsets[t + 1] - before_offsets[t]
+                assert np.array_equal(got[lo:hi], before[before_offsets[t]:before_offsets[t + 1]])
+                want_flags.append(before_flags[before_offsets[t]:before_offsets[t + 1]])
+        assert np.array_equal(got_flags, np.concatenate(want_flags))
+        assert np.array_equal(again, np.concatenate(want_again)) and 0 < again.size < 0.5 * len(got)
+        # In place unless there are more tets than before.
+        assert np.shares_memory(got, out) == (len(got) <= len(before))
+        grown, shrunk = grown + (len(got) > len(before)), shrunk + (len(got) < len(before))
+        targets, out, offsets, flags = new, got, got_offsets, got_flags
+    assert grown + shrunk > 0
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -453,39 +471,54 @@ def test_group_by_vertex_against_naive(seed):
     assert got == naive_group_by_vertex(vertices, owners)
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_splice_against_concatenation(seed):
-    """_shifted_offsets and _splice give lattice tet t's new tets where the rows stuffed again
-    replace theirs (counts changed, to none included), as concatenating each lattice tet's
-    tets in order does; kept names the old index of every copied tet.  Rows at the ends, no
-    rows, and fewer lattice tets than chunks included."""
+@pytest.mark.parametrize("seed", range(6))
+def test_in_place_splice_against_concatenation(seed):
+    """_move_kept, _shift_offsets and _place_again put lattice tet t's new tets where the rows
+    stuffed again replace theirs (counts changed, to none included), in place in a buffer with
+    room for them, as concatenating each lattice tet's tets in order does; flags move with the
+    kept tets and are 0 for the others.  Rows at the ends, no rows, blocks moving both ways and
+    fewer lattice tets than chunks included."""
     rng = np.random.default_rng(1000 + seed)
-    n = [0, 3, 50, 1000, 5000][seed]
+    n = [0, 3, 50, 1000, 5000, 400][seed]
     counts = rng.integers(0, 4, n)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     out = rng.integers(0, 10**6, (offsets[-1], 4)).astype(np.int32)
+    flags = rng.integers(1, 256, out.shape[0]).astype(np.uint8)
     rows = np.unique(np.concatenate([rng.choice(n, size=min(n, 7)) if n else [], [0, n - 1] if n > 1 else []]))
     rows = rows.astype(np.int64)
     again_counts = rng.integers(0, 4, rows.size)
+    if seed == 5:  # one row grows a lot, the next shrinks: blocks move up, then down
+        again_counts[:] = counts[rows]
+        again_counts[1], counts[rows[2]] = 9, 9
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        out = rng.integers(0, 10**6, (offsets[-1], 4)).astype(np.int32)
+        flags = rng.integers(1, 256, out.shape[0]).astype(np.uint8)
+        again_counts[2] = 0
     again_offsets = np.concatenate([[0], np.cumsum(again_counts)]).astype(np.int64)
     again = rng.integers(-10**6, 0, (again_offsets[-1], 4)).astype(np.int32)
-    pieces, kept_pieces = [], []
+    pieces, flag_pieces = [], []
     for t in range(n):
         j = np.searchsorted(rows, t)
         if j < rows.size and rows[j] == t:
             pieces.append(again[again_offsets[j]:again_offsets[j + 1]])
-            kept_pieces.append(np.full(again_counts[j], -1))
+            flag_pieces.append(np.zeros(again_counts[j], dtype=np.uint8))
         else:
             pieces.append(out[offsets[t]:offsets[t + 1]])
-            kept_pieces.append(np.arange(offsets[t], offsets[t + 1]))
+            flag_pieces.append(flags[offsets[t]:offsets[t + 1]])
     want = np.concatenate(pieces) if pieces else np.empty((0, 4), dtype=np.int32)
-    new_offsets = _shifted_offsets(offsets, rows, again_offsets)
-    np.testing.assert_array_equal(new_offsets, np.concatenate([[0], np.cumsum([len(p) for p in pieces])]))
-    got = np.empty((new_offsets[-1], 4), dtype=np.int32)
-    kept = np.empty(got.shape[0], dtype=np.int64)
-    _splice(out, offsets, again, again_offsets, rows, new_offsets, got, kept)
-    np.testing.assert_array_equal(got, want)
-    np.testing.assert_array_equal(kept, np.concatenate(kept_pieces) if kept_pieces else np.empty(0))
+    total = want.shape[0]
+    room = max(total, out.shape[0])
+    buffer = np.full((room, 4), -7, dtype=np.int32)
+    buffer[:out.shape[0]] = out
+    buffer_flags = np.zeros(room, dtype=np.uint8)
+    buffer_flags[:out.shape[0]] = flags
+    old_counts = offsets[rows + 1] - offsets[rows]
+    _move_kept(buffer, buffer_flags, offsets, rows, again_offsets)
+    _shift_offsets(offsets, rows, old_counts, again_offsets)
+    np.testing.assert_array_equal(offsets, np.concatenate([[0], np.cumsum([len(p) for p in pieces])]))
+    _place_again(buffer, buffer_flags, offsets[rows], again, again_offsets)
+    np.testing.assert_array_equal(buffer[:total], want)
+    np.testing.assert_array_equal(buffer_flags[:total], np.concatenate(flag_pieces) if flag_pieces else [])
 
 
 def test_retarget_warps_mends_needles_and_keeps_the_bound_first():

@@ -724,26 +724,23 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
     # changes level may give tets outside the bound.  Other warps near them mend most; where
     # they do not, this pass only says where the band must be finer.
-    is_bad, is_needle = _outside_bound(points, out_tets, _core(inside, targets, points.shape[0]))
+    flags = _outside_bound(points, out_tets, _core(inside, targets, points.shape[0]))
     for _ in range(RETARGET_PASSES):
-        if not (is_bad.any() or is_needle.any()):
+        if not flags.any():
             break
         # points follow the new warps in place: restuff takes them as they are.
-        new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
-                                              np.flatnonzero(is_bad | is_needle), NEEDLE_RATIO, offsets=offsets,
-                                              points=points)
+        new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets, np.flatnonzero(flags),
+                                              NEEDLE_RATIO, offsets=offsets, points=points)
         if not changed:
             break
         # Only the lattice tets around the vertices that warp elsewhere change: stuff and
-        # measure those again, keep the rest.
-        points, out_tets, kept, offsets = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
-                                                  new_targets, offsets=offsets, flat_ok=True, points=points)
+        # measure those again; the others' tets and flags move in place.
+        points, out_tets, again, offsets, flags = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
+                                                          new_targets, offsets=offsets, flat_ok=True, points=points,
+                                                          flags=flags)
         targets = new_targets
-        again = np.flatnonzero(kept < 0)
-        is_bad, is_needle = is_bad[kept], is_needle[kept]
-        core = _core(inside, targets, points.shape[0])
-        is_bad[again], is_needle[again] = _outside_bound(points, np.take(out_tets, again, axis=0), core)
-    bad = np.flatnonzero(is_bad)
+        flags[again] = _outside_bound(points, np.take(out_tets, again, axis=0), _core(inside, targets, points.shape[0]))
+    bad = np.flatnonzero(flags & OUTSIDE)
     stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
     is_lattice = lattice < coords.shape[0]  # the bad tets' lattice vertices (every tet has one)
@@ -771,7 +768,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         stages.done("quality")
         return None, asks
     # As in _mesh_at: what stuffing needed is freed before _finish allocates.
-    del vertices, coords, tets, cuts, spacing, lattice_points, keys, levels, in_band, is_bad, is_needle, offsets
+    del vertices, coords, tets, cuts, spacing, lattice_points, keys, levels, in_band, flags, offsets
     return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
 
 
@@ -783,21 +780,23 @@ def _core(inside: np.ndarray, targets: np.ndarray, n_points: int) -> np.ndarray:
     return core
 
 
-def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Masks (M,) of the tets with a dihedral angle outside DIHEDRAL_BOUND (folded and flat ones
-    included: 0 and 180 degrees), and of the others with 3r/R below
-    NEEDLE_RATIO.  core: _core's mask.  Tets of four core vertices are lattice tets stuffing
-    copied, fat tets and transition templates (dihedral angles in [30, 135] degrees, 3r/R >=
-    0.4: docs/transitions.md), so only the band's are measured (half of round_rod's 4.05 M
-    tets at diag/80, the band of a thin rod)."""
+#: Flags _outside_bound gives a tet: a dihedral angle outside DIHEDRAL_BOUND; else 3r/R below NEEDLE_RATIO.
+OUTSIDE, NEEDLE = 1, 2
+
+
+def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Flags (M,) uint8 of the tets: OUTSIDE with a dihedral angle outside DIHEDRAL_BOUND
+    (folded and flat ones included: 0 and 180 degrees), NEEDLE for the others with 3r/R below
+    NEEDLE_RATIO, else 0.  core: _core's mask.  Tets of four core vertices are lattice tets
+    stuffing copied, fat tets and transition templates (dihedral angles in [30, 135] degrees,
+    3r/R >= 0.4: docs/transitions.md), so only the band's are measured (half of round_rod's
+    4.05 M tets at diag/80, the band of a thin rod)."""
     measured = band_mask(tets, core)
     bad, thin = dihedral_outliers(points, np.compress(measured, tets, axis=0),  # compress: 3x a fancy index
                                   DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], NEEDLE_RATIO)
-    outside = np.zeros(tets.shape[0], dtype=bool)
-    needle = np.zeros(tets.shape[0], dtype=bool)
-    outside[measured] = bad
-    needle[measured] = thin
-    return outside, needle
+    flags = np.zeros(tets.shape[0], dtype=np.uint8)
+    flags[measured] = np.where(bad, OUTSIDE, np.where(thin, NEEDLE, 0))
+    return flags
 
 
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:

@@ -729,85 +729,117 @@ def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
 
 def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
             targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *, offsets: np.ndarray,
-            flat_ok: bool = False, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            flat_ok: bool = False, points: np.ndarray | None = None,
+            flags: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """stuff(..., new_targets), given out, offsets = stuff(..., targets)[1:]: only the lattice
-    tets with a vertex whose warp changed are stuffed again, the others' tets are copied.
-    points: stuff's points for new_targets if the caller has them (retarget_warps updates
-    stuff's in place), else computed.
+    tets with a vertex whose warp changed are stuffed again; the others' tets move up or down
+    in out, in place, and so do their flags (M,) uint8 (any per-tet bytes of the caller's;
+    None: none).  out, offsets and flags are overwritten: the results are them, or views of
+    them, when the new tets are not more (always but rarely: warps changed to mend bad tets
+    mostly cut fewer), else new arrays.  (A copy into new arrays, as before, faulted in 63 MB
+    a call on fea_part's 2.7 M tets at diag/80, and was the mesh's peak.)  points: stuff's
+    points for new_targets if the caller has them (retarget_warps updates stuff's in place),
+    else computed.
 
-    Returns (points, tets (M, 4) int32, kept (M,) int64, offsets): the same points, tets and
-    offsets as stuff with new_targets, and for each tet its index in out, or -1 if it was
-    stuffed again.
+    Returns (points, tets (M', 4) int32, again, offsets, flags (M',)): the same points, tets
+    and offsets as stuff with new_targets; again: the indices (ascending) of the tets stuffed
+    again, whose flags are 0, the others' kept.
     """
     tets = np.ascontiguousarray(tets)
     if offsets.shape[0] != tets.shape[0] + 1 or offsets[-1] != out.shape[0]:
         raise ValueError(f"len(offsets) = {offsets.shape[0]} ending at {offsets[-1]}, but {tets.shape[0]} lattice tets "
                          f"stuffed into len(out) = {out.shape[0]}")
+    flags = np.zeros(out.shape[0], dtype=np.uint8) if flags is None else flags
+    if flags.shape != (out.shape[0],) or flags.dtype != np.uint8:
+        raise ValueError(f"flags: shape {flags.shape}, dtype {flags.dtype}; expected ({out.shape[0]},) uint8")
     if points is None:
         points = _warped_points(lattice_points, cuts.points, new_targets)
     signs = _signs(inside, new_targets)
     rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
                                         flat_ok)
-    new_offsets = _shifted_offsets(offsets, rows, again_offsets)
-    new_out = np.empty((int(new_offsets[-1]), 4), dtype=np.int32)
-    kept = np.empty(new_out.shape[0], dtype=np.int64)
-    _splice(out, offsets, again, again_offsets, rows, new_offsets, new_out, kept)
-    return points, new_out, kept, new_offsets
+    old_counts = np.take(offsets, rows + 1) - np.take(offsets, rows)
+    total = int(offsets[-1] + again_offsets[-1] - old_counts.sum())
+    if total > out.shape[0]:
+        out = np.concatenate([out, np.empty((total - out.shape[0], 4), dtype=np.int32)])
+        flags = np.concatenate([flags, np.zeros(total - flags.shape[0], dtype=np.uint8)])
+    _move_kept(out, flags, offsets, rows, again_offsets)
+    _shift_offsets(offsets, rows, old_counts, again_offsets)
+    starts = np.take(offsets, rows)
+    _place_again(out, flags, starts, again, again_offsets)
+    counts = np.diff(again_offsets)
+    stuffed = np.repeat(starts - again_offsets[:-1], counts) + np.arange(again_offsets[-1])
+    return points, out[:total], stuffed, offsets, flags[:total]
+
+
+@nb.njit(cache=True)
+def _move_rows(out, flags, start, end, shift):
+    """Rows start..end - 1 of out and flags moved by shift, overlap-safe (memmove)."""
+    step = -1 if shift > 0 else 1
+    first, last = (end - 1, start - 1) if shift > 0 else (start, end)
+    for i in range(first, last, step):
+        for k in range(4):
+            out[i + shift, k] = out[i, k]
+        flags[i + shift] = flags[i]
+
+
+@nb.njit(cache=True)
+def _move_kept(out, flags, offsets, rows, again_offsets):
+    """Move the tets of the lattice tets between rows (sorted; runs of them, each one block of
+    out) to where they go once rows' tets have again_offsets' counts.  Blocks moving up go
+    first, from the last; then those moving down, from the first: a block's destination then
+    never holds tets not yet moved (destinations keep the blocks' order, and a block moving
+    up ends before the next block moving down starts)."""
+    n_rows = rows.shape[0]
+    n = offsets.shape[0] - 1
+    shift = np.zeros(n_rows + 1, dtype=np.int64)
+    start = np.empty(n_rows + 1, dtype=np.int64)
+    end = np.empty(n_rows + 1, dtype=np.int64)
+    for j in range(n_rows + 1):
+        lo = 0 if j == 0 else rows[j - 1] + 1
+        hi = rows[j] if j < n_rows else n
+        start[j] = offsets[lo]
+        end[j] = offsets[hi]
+        if j < n_rows:
+            r = rows[j]
+            shift[j + 1] = shift[j] + (again_offsets[j + 1] - again_offsets[j]) - (offsets[r + 1] - offsets[r])
+    for j in range(n_rows, -1, -1):
+        if shift[j] > 0:
+            _move_rows(out, flags, start[j], end[j], shift[j])
+    for j in range(n_rows + 1):
+        if shift[j] < 0:
+            _move_rows(out, flags, start[j], end[j], shift[j])
 
 
 @nb.njit(cache=True, parallel=True)
-def _shifted_offsets(offsets, rows, again_offsets):
-    """Offsets (T + 1,) of the lattice tets' stencils once lattice tets rows (sorted) have
-    again_offsets' counts instead of their own; in chunks of lattice tets, each starting from
-    the shift of the rows before it."""
+def _shift_offsets(offsets, rows, old_counts, again_offsets):
+    """offsets (T + 1,), in place, once lattice tets rows (sorted; old_counts tets each) have
+    again_offsets' counts; in chunks of lattice tets, each starting from the shift of the rows
+    before it."""
     n = offsets.shape[0] - 1
     shift = np.zeros(rows.shape[0] + 1, dtype=np.int64)  # shift[j]: what rows[:j] add
     for j in range(rows.shape[0]):
-        r = rows[j]
-        shift[j + 1] = shift[j] + (again_offsets[j + 1] - again_offsets[j]) - (offsets[r + 1] - offsets[r])
-    new = np.empty(n + 1, dtype=np.int64)
+        shift[j + 1] = shift[j] + (again_offsets[j + 1] - again_offsets[j]) - old_counts[j]
     n_chunks = min(n, TET_CHUNKS)
     for c in nb.prange(n_chunks):
         t0 = c * n // n_chunks
         j = np.searchsorted(rows, t0)
         for t in range(t0, (c + 1) * n // n_chunks):
-            new[t] = offsets[t] + shift[j]
+            offsets[t] += shift[j]
             if j < rows.shape[0] and rows[j] == t:
                 j += 1
-    new[n] = offsets[n] + shift[rows.shape[0]]
-    return new
+    offsets[n] += shift[rows.shape[0]]
 
 
-@nb.njit(cache=True, parallel=True)
-def _splice(out, old_offsets, again, again_offsets, rows, offsets, new_out, kept):
-    """new_out[offsets[t]:offsets[t + 1]]: lattice tet t's tets, from again if it is rows[j]
-    (stuffed again: again[again_offsets[j]:again_offsets[j + 1]]), else from out; kept: their
-    index in out, or -1.  In chunks of lattice tets: the kept ones between two rows are one
-    block of out."""
-    n = offsets.shape[0] - 1
-    n_chunks = min(n, TET_CHUNKS)
-    for c in nb.prange(n_chunks):
-        t = c * n // n_chunks
-        end = (c + 1) * n // n_chunks
-        j = np.searchsorted(rows, t)
-        while t < end:
-            stop = min(end, rows[j]) if j < rows.shape[0] else end
-            src = old_offsets[t]
-            dst = offsets[t]
-            for i in range(old_offsets[stop] - src):
-                kept[dst + i] = src + i
-                for k in range(4):
-                    new_out[dst + i, k] = out[src + i, k]
-            t = stop
-            if t < end:  # t == rows[j]
-                dst = offsets[t]
-                for i in range(again_offsets[j + 1] - again_offsets[j]):
-                    kept[dst + i] = -1
-                    for k in range(4):
-                        new_out[dst + i, k] = again[again_offsets[j] + i, k]
-                j += 1
-                t += 1
+@nb.njit(cache=True)
+def _place_again(out, flags, starts, again, again_offsets):
+    """The tets stuffed again, again[again_offsets[j]:again_offsets[j + 1]], into out from
+    starts[j] on, their flags 0."""
+    for j in range(starts.shape[0]):
+        for i in range(again_offsets[j + 1] - again_offsets[j]):
+            for k in range(4):
+                out[starts[j] + i, k] = again[again_offsets[j] + i, k]
+            flags[starts[j] + i] = 0
 
 
 @nb.njit(cache=True)
