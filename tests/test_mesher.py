@@ -429,7 +429,8 @@ def test_cut_points_are_the_frames_space_points_along_the_edges_rounded_alike(n_
 @pytest.mark.parametrize("n_points, n_tets", [(0, 0), (5, 0), (1, 1), (70, 3), (1000, 40), (5000, 3000)])
 def test_compact_keeps_the_used_points_in_order(n_points, n_tets):
     """_used_ids numbers the points the tets use in point order, and
-    _compact drops the others: the same points and tets as numpy's unique and searchsorted."""
+    _compact drops the others, renumbering the tets in place: the same points and tets as
+    numpy's unique and searchsorted."""
     rng = np.random.default_rng(n_points + n_tets)
     tets = rng.integers(0, max(n_points, 1), (n_tets, 4)).astype(np.int32)
     points = rng.random((n_points, 3))
@@ -437,6 +438,8 @@ def test_compact_keeps_the_used_points_in_order(n_points, n_tets):
     want = np.full(n_points, -1)
     want[used] = np.arange(used.size)
     np.testing.assert_array_equal(_used_ids(tets, n_points), want)
+    want_tets = np.searchsorted(used, tets)
     got_points, got_tets = _compact(points, tets)
     np.testing.assert_array_equal(got_points, points[used])
-    np.testing.assert_array_equal(got_tets, np.searchsorted(used, tets))
+    np.testing.assert_array_equal(got_tets, want_tets)
+    assert got_tets is tets  # renumbered in place

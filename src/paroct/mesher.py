@@ -1048,9 +1048,12 @@ def _cut_points(coords, starts, ends, fracs, origin, h, matrix):
 
 
 def _compact(points, tets):
-    """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order."""
+    """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order.
+    tets (M, 4) int32 are renumbered in place (a new (M, 4) array cost a fresh page every
+    256 tets) and returned."""
     new_id = _used_ids(tets, points.shape[0])
-    return np.compress(new_id >= 0, points, axis=0), _renumber(tets, new_id)  # compress: 3x a boolean index
+    _renumber(tets, new_id)
+    return np.compress(new_id >= 0, points, axis=0), tets  # compress: 3x a boolean index
 
 
 @nb.njit(cache=True)
@@ -1071,11 +1074,10 @@ def _used_ids(tets, n_points):
 
 @nb.njit(cache=True, parallel=True)
 def _renumber(tets, new_id):
-    out = np.empty((tets.shape[0], 4), dtype=np.int32)
+    """tets[t, i] = new_id[tets[t, i]], in place."""
     for t in nb.prange(tets.shape[0]):
         for i in range(4):
-            out[t, i] = new_id[tets[t, i]]
-    return out
+            tets[t, i] = new_id[tets[t, i]]
 
 
 def _measure(points, tets, core, topo: SurfaceTopology, report: MeshReport) -> None:
