@@ -27,7 +27,7 @@ from .transitions import (
 )
 
 _EMPTY = np.int64(-1)
-#: Number leaf corners through a dense index (4 bytes a lattice point, in bricks of 8^3: only
+#: Number leaf corners through a dense index (4 bytes a lattice point, in bricks of 8^3, BRICK_BITS: only
 #: the bricks that hold a leaf point, found through a directory of 4 bytes a brick of the
 #: leaves' box) when directory and bricks have at most this many slots per leaf, else through
 #: a hash table (16 bytes a slot, at least 8 slots a leaf).  At 64 (256 bytes a leaf, which
@@ -65,8 +65,9 @@ def _box_brick(x, y, z, box_lo, bricks):
 
 
 def _dense_slot(x, y, z, box_lo, bricks, directory):
-    """Index of a point of the box in the dense index: its brick's place times the slots of a brick, plus its
-    Morton order inside the brick, so leaves visited in Morton order touch few cache lines.
+    """Index of a point of the box in the dense index: its brick's place times the slots of a
+    brick, plus its Morton order inside the brick, so leaves visited in Morton order touch few
+    cache lines.
     The brick's place is its index in the box (directory None: every brick is in the index),
     or directory[that index] (_brick_directory: only the bricks holding leaf points are)."""
     raise NotImplementedError("compiled only: see _overload_dense_slot")

@@ -735,9 +735,9 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     tets with a vertex whose warp changed are stuffed again; the others' tets move up or down
     in out, in place, and so do their flags (M,) uint8 (any per-tet bytes of the caller's;
     None: none).  out, offsets and flags are overwritten: the results are them, or views of
-    them, when the new tets are not more (always but rarely: warps changed to mend bad tets
-    mostly cut fewer), else new arrays.  (A copy into new arrays, as before, faulted in 63 MB
-    a call on fea_part's 2.7 M tets at diag/80, and was the mesh's peak.)  points: stuff's
+    them, unless the new tets are more (rare: warps changed to mend bad tets mostly cut
+    fewer), and then new arrays.  (A copy into new arrays, as before, faulted in 63 MB a call
+    on fea_part's 2.7 M tets at diag/80, and was the mesh's peak.)  points: stuff's
     points for new_targets if the caller has them (retarget_warps updates stuff's in place),
     else computed.
 
