@@ -343,7 +343,7 @@ def _number_all_face_centres(table, bits, bricks, box_lo, directory, anchors, si
             table, bits = _with_room(table, bits, count + 6)
             done, count = _number_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets,
                                                split_row, split_ids, eager, phase, rule, done, coords, count)
-    return coords[:count].copy()
+    return coords[:count]
 
 
 @nb.njit(cache=True)
@@ -405,7 +405,9 @@ def _leaf_tets(corner_ids, split_row, split_ids, marked, chains, chain_odd, chai
                 if _template_tet_kept(labels, tmpl_tets[mask, t], marked):
                     k += 1
         counts[i + 1] = k
-    offsets = np.cumsum(counts)
+    for i in range(n):  # the offsets, in place: numpy's cumsum would write another (L + 1,) array
+        counts[i + 1] += counts[i]
+    offsets = counts
     tets = np.empty((offsets[n], 4), dtype=np.int32)
     for i in nb.prange(n):
         k = offsets[i]
