@@ -214,6 +214,33 @@ def face_centres(anchors: np.ndarray, sides: np.ndarray, eager: np.ndarray) -> s
     return out
 
 
+def vertex_order(anchors: np.ndarray, sides: np.ndarray, eager: np.ndarray, prefix: np.ndarray) -> np.ndarray:
+    """Lattice points (V, 3) of number_vertices' vertices in id order, by its definition: the
+    prefix points, then each leaf's corners (corner c at anchor + side * CUBE_CORNERS[c]) leaf
+    by leaf, then the face centres that are vertices (face_centres), first those of the leaves
+    marked eager, then of the others, each leaf's in SPLIT_POINT_OFFSETS order; a point at its
+    first place only."""
+    from paroct.frame import CUBE_CORNERS
+    from paroct.transitions import SPLIT_POINT_OFFSETS
+
+    centres = face_centres(anchors, sides, eager)
+    order = {}
+    for p in prefix.tolist():
+        order.setdefault(tuple(p), len(order))
+    for a, s in zip(anchors.tolist(), sides.tolist()):
+        for c in CUBE_CORNERS.tolist():
+            order.setdefault(tuple(a[k] + s * c[k] for k in range(3)), len(order))
+    for phase in (True, False):
+        for a, s, e in zip(anchors.tolist(), sides.tolist(), eager.tolist()):
+            if s < 2 or bool(e) != phase:
+                continue
+            for offset in SPLIT_POINT_OFFSETS[12:].tolist():
+                point = tuple(a[k] + s // 2 * offset[k] for k in range(3))
+                if point in centres:
+                    order.setdefault(point, len(order))
+    return np.array(list(order), dtype=np.int64).reshape(-1, 3)
+
+
 def match_faces(tets: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Face neighbours by a dict of sorted vertex triples (see topology.match_faces)."""
     faces_of = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]

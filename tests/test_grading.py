@@ -24,7 +24,7 @@ from paroct.transitions import (
     TEMPLATES,
 )
 
-from .naive import cells_meeting_triangles, face_centres
+from .naive import cells_meeting_triangles, face_centres, vertex_order
 
 FAT_RATIO = 3 / np.sqrt(10)
 ML = octant.MAX_LEVEL
@@ -109,6 +109,20 @@ def test_random_balanced_trees_conform_with_template_quality(seed, rule, min_ang
     plain = np.ones(len(sides), dtype=bool)
     plain[sides >= 2] = (vertices.split_ids < 0).all(axis=1)
     assert np.isclose(q.radius_ratio, FAT_RATIO, atol=1e-9).sum() >= 6 * plain.sum()
+
+
+@pytest.mark.parametrize("rule", ["minimal", "eager", "mixed"])
+@pytest.mark.parametrize("seed", range(6))
+def test_vertex_ids_follow_the_numbering_order(seed, rule):
+    """Ids in order of first use, face centres last (eager leaves' first): the parallel
+    lookups and the ordered numbering of the new face centres give the leaf-by-leaf order."""
+    anchors, sides = _random_balanced_tree(400 + seed, 3 + seed % 3)
+    eager = _eager_leaves(rule, len(sides), seed)
+    corners = (anchors[:, None, :] + sides[:, None, None] * lattice.CUBE_CORNERS[None]).reshape(-1, 3)
+    prefix = np.unique(corners[np.random.default_rng(seed).random(len(corners)) < 0.2], axis=0)[::-1]
+    vertices = lattice.number_vertices(anchors, sides, prefix, eager=eager)
+    assert np.array_equal(vertices.coords, vertex_order(anchors, sides, eager, prefix))
+    assert np.array_equal(vertices.coords[vertices.corner_ids], corners.reshape(-1, 8, 3))
 
 
 def test_hashed_vertex_numbering_grows_its_table_and_keeps_the_ids(monkeypatch):

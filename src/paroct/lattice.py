@@ -240,7 +240,7 @@ def _number_points(table, bits, bricks, box_lo, directory, points, start, coords
 @nb.njit(cache=True)
 def _number_corners(table, bits, bricks, box_lo, directory, anchors, sides, start, corner_ids, coords, count):
     """Number the corners of leaves start.. into corner_ids (L, 8), as _number_points.  The
-    lookup is spelled out here and in _number_face_centres: an inlined helper taking the arrays
+    lookup is spelled out here and in _add_face_centres: an inlined helper taking the arrays
     made this loop 1.6-2.6x slower."""
     for i in range(start, anchors.shape[0]):
         if not _has_room(table, count + 8):
@@ -256,34 +256,67 @@ def _number_corners(table, bits, bricks, box_lo, directory, anchors, sides, star
     return anchors.shape[0], count
 
 
-@nb.njit(cache=True)
-def _number_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, split_row, split_ids,
-                         eager, phase, rule, start, coords, count):
-    """Number the face centres (split points 12..17) of the coarse leaves start.. that phase 0
-    (eager leaves, by the eager rule) or 1 (the others, by the minimal rule) handles, as
-    _number_points; the rules read the leaf's edge midpoints (_edge_midpoint_ids)."""
-    for i in range(start, anchors.shape[0]):
-        r = split_row[i]
-        if r < 0 or eager[i] != (phase == 0):
-            continue
-        if not _has_room(table, count + 6):
-            return i, count
+@nb.njit(cache=True, parallel=True)
+def _face_centre_ids(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, coarse, split_ids, eager,
+                     eager_rule, minimal_rule, again):
+    """split_ids[r, 12:18]: the ids of the face centres of leaf coarse[r] that are vertices
+    already, -1 for the others; the table is only read, in parallel.  Returns asked (R,)
+    uint8: bit p - 12 set where face centre p is not a vertex yet and the leaf's rule (the
+    eager rule for leaves marked eager, else the minimal one; the rules read the leaf's edge
+    midpoints, _edge_midpoint_ids) asks for it.  again: look up only the entries still -1,
+    and ask nothing (after _add_face_centres)."""
+    asked = np.zeros(coarse.shape[0], dtype=np.uint8)
+    for r in nb.prange(coarse.shape[0]):
+        i = coarse[r]
+        rule = eager_rule if eager[i] else minimal_rule
         half = sides[i] // 2
+        mask = 0
         for p in range(12, 18):
+            if again and split_ids[r, p] >= 0:
+                continue
             x = anchors[i, 0] + half * split_offsets[p, 0]
             y = anchors[i, 1] + half * split_offsets[p, 1]
             z = anchors[i, 2] + half * split_offsets[p, 2]
-            split = False
+            vid, _ = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, -1, False)
+            split_ids[r, p] = vid
+            if vid >= 0 or again:
+                continue
             for g in range(rule.shape[1]):
                 group = True
                 for e in rule[p - 12, g]:
                     group &= split_ids[r, e] >= 0
-                split |= group
-            vid, new = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, count, split)
+                if group:
+                    mask |= 1 << (p - 12)
+                    break
+        asked[r] = mask
+    return asked
+
+
+@nb.njit(cache=True)
+def _add_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, coarse, split_ids, asked,
+                      eager, phase, start, coords, count):
+    """Number the asked face centres (_face_centre_ids) of the leaves coarse[start:] that
+    phase 0 (leaves marked eager) or 1 (the others) handles, in order, as _number_points:
+    each new one as the next id, one the same-size leaf across the face asked for first
+    found."""
+    for r in range(start, coarse.shape[0]):
+        i = coarse[r]
+        if asked[r] == 0 or eager[i] != (phase == 0):
+            continue
+        if not _has_room(table, count + 6):
+            return r, count
+        half = sides[i] // 2
+        for p in range(12, 18):
+            if asked[r] & (1 << (p - 12)) == 0:
+                continue
+            x = anchors[i, 0] + half * split_offsets[p, 0]
+            y = anchors[i, 1] + half * split_offsets[p, 1]
+            z = anchors[i, 2] + half * split_offsets[p, 2]
+            vid, new = _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, count, True)
             if new:
                 count = _add(coords, count, x, y, z)
             split_ids[r, p] = vid
-    return anchors.shape[0], count
+    return coarse.shape[0], count
 
 
 @nb.njit(cache=True, parallel=True)
@@ -328,22 +361,18 @@ def _number_corner_vertices(table, bits, anchors, sides, prefix, box_lo, bricks,
 
 
 @nb.njit(cache=True)
-def _number_all_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, split_row,
-                             split_ids, eager, eager_rule, minimal_rule, coords, count):
-    """The face centres of the coarse leaves, first of the leaves marked eager (L,), in order,
-    by eager_rule, then of the others by minimal_rule (rules (6, G, K) as in
-    transitions.FACE_CENTRE_RULES: some group of K face edges all split); returns the
-    vertices' coordinates (V, 3).  A face centre no rule asks for is still a vertex if it
-    already is one: a corner of finer leaves, or asked for by the eager leaf on the face's
-    other side."""
+def _number_asked_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets, coarse,
+                               split_ids, asked, eager, coords, count):
+    """The asked face centres (_face_centre_ids) numbered, first those of the leaves marked
+    eager, then of the others, each in leaf order; returns (table, bits, the vertices'
+    coordinates (V, 3): a view of coords)."""
     for phase in range(2):
-        rule = eager_rule if phase == 0 else minimal_rule
         done = 0
-        while done < anchors.shape[0]:
+        while done < coarse.shape[0]:
             table, bits = _with_room(table, bits, count + 6)
-            done, count = _number_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets,
-                                               split_row, split_ids, eager, phase, rule, done, coords, count)
-    return coords[:count]
+            done, count = _add_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, split_offsets,
+                                            coarse, split_ids, asked, eager, phase, done, coords, count)
+    return table, bits, coords[:count]
 
 
 @nb.njit(cache=True)
@@ -519,9 +548,19 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     # Three kernels, not one: a parallel kernel called from a cached one segfaults when loaded
     # from the cache (numba issue #8578).
     _edge_midpoint_ids(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse, split_ids)
-    coords = _number_all_face_centres(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS,
-                                      split_row, split_ids, eager, FACE_CENTRE_RULES["eager"],
-                                      FACE_CENTRE_RULES["minimal"], coords, count)
+    # Face centres: a face gets its centre if the rule of a leaf sharing it asks.  The rules
+    # read only the face's edges, the same for both leaves, and minimal asks imply eager asks,
+    # so a leaf whose rule does not ask finds a centre only from an eager leaf, numbered in the
+    # first phase: the ids of the numbering leaf by leaf, with the lookups in parallel and
+    # only the new centres numbered in order.
+    rules = FACE_CENTRE_RULES["eager"], FACE_CENTRE_RULES["minimal"]
+    asked = _face_centre_ids(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse,
+                             split_ids, eager, *rules, False)
+    table, bits, coords = _number_asked_face_centres(table, bits, bricks, box_lo, directory, anchors, sides,
+                                                     SPLIT_POINT_OFFSETS, coarse, split_ids, asked, eager, coords,
+                                                     count)
+    _face_centre_ids(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse, split_ids,
+                     eager, *rules, True)
     return LeafVertices(corner_ids, split_row, split_ids, coords)
 
 
