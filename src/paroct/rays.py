@@ -310,10 +310,28 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
         # position in faces[face_ids], the same order as on faces (ascending ids).
         order = written[np.argsort(keys[written])]
         _order_cells(keys, fracs, hit_faces, order)
-    hit_faces = hit_faces[order]
-    if face_ids is not None:
-        hit_faces = face_ids[hit_faces].astype(np.int32)
-    return RowCrossings(direction, keys[order], fracs[order], signs[order], hit_faces)
+    no_ids = np.empty(0, dtype=np.int64)
+    return RowCrossings(direction, *_gather_crossings(order, keys, fracs, signs, hit_faces,
+                                                      no_ids if face_ids is None else face_ids, face_ids is not None))
+
+
+@nb.njit(cache=True, parallel=True)
+def _gather_crossings(order, keys, fracs, signs, faces, face_ids, by_ids):
+    """The crossings at order (C,) in the fill's slots, as (keys, fracs, signs, faces) in one
+    parallel pass; faces through face_ids when by_ids (the fill numbered a subset).  (numpy's
+    four fancy-index gathers and the id map took 9 of tray_bottom's 392 ms at diag/40.)"""
+    n = order.shape[0]
+    out_keys = np.empty(n, dtype=np.int64)
+    out_fracs = np.empty(n, dtype=np.float64)
+    out_signs = np.empty(n, dtype=np.int8)
+    out_faces = np.empty(n, dtype=np.int32)
+    for i in nb.prange(n):
+        s = order[i]
+        out_keys[i] = keys[s]
+        out_fracs[i] = fracs[s]
+        out_signs[i] = signs[s]
+        out_faces[i] = face_ids[faces[s]] if by_ids else faces[s]
+    return out_keys, out_fracs, out_signs, out_faces
 
 
 #: row_crossings fills in only the triangles whose boxes hold a row when they are fewer than
