@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from paroct import rays
+from paroct import octant, rays
 from paroct.frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame, row_basis
 from paroct.lattice import leaf_tets
 from paroct.octree import octant_lattice_anchors, uniform_leaves
@@ -202,6 +202,16 @@ def test_row_counting_sort_orders_as_argsort(monkeypatch):
             assert counted.keys.size > 100
             for field in ("keys", "fracs", "signs", "faces"):
                 assert np.array_equal(getattr(counted, field), getattr(sorted_, field)), (name, d, field)
+            # Searches through the row index and by galloping (no index) find the same: lattice
+            # points in and around the box of the crossed rows, with edges from each.
+            assert counted.row_starts.size > 1 and sorted_.row_starts.size == 0
+            points = RNG.integers(-3, (1 << frame.levels) + 4, size=(3000, 3)).astype(np.int64)
+            points = points[np.argsort(octant.morton_keys(points + 3), kind="stable")]
+            assert np.array_equal(rays.winding_numbers(counted, points), rays.winding_numbers(sorted_, points))
+            start_inside = RNG.random(len(points)) < 0.5
+            for a, b in zip(rays.edge_cut_fractions(counted, points, start_inside),
+                            rays.edge_cut_fractions(sorted_, points, start_inside)):
+                assert np.array_equal(a, b), (name, d)
     rows = RNG.integers(0, 30, size=(4000, 2)) + rays._KEY_OFFSET
     keys = (rows[:, 0] << (2 * rays._KEY_BITS)) | (rows[:, 1] << rays._KEY_BITS) | RNG.integers(0, 5, size=4000)
     fracs = RNG.integers(0, 4, size=4000) / 4.0
@@ -209,9 +219,15 @@ def test_row_counting_sort_orders_as_argsort(monkeypatch):
     written = np.sort(RNG.choice(5000, size=4000, replace=False))
     keys_at, fracs_at, faces_at = (np.zeros(5000, dtype=a.dtype) for a in (keys, fracs, faces))
     keys_at[written], fracs_at[written], faces_at[written] = keys, fracs, faces
-    order = rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30)
+    order, (lo2, lo3, width), starts = rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30)
     assert np.array_equal(order, written[np.lexsort((faces, fracs, keys))])
-    assert rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30 - 1).size == 0
+    # The row index: row r (row-major over the box) holds exactly the crossings starts[r]..
+    r2, r3 = rows[np.lexsort((faces, fracs, keys))].T
+    r = (r2 - lo2) * width + r3 - lo3
+    at = np.arange(len(r))
+    assert starts.shape == (30 * 30 + 1,) and np.all(np.diff(starts) >= 0) and starts[-1] == len(r)
+    assert np.all((starts[r] <= at) & (at < starts[r + 1]))
+    assert rays._row_order(keys_at, fracs_at, faces_at, written, 30 * 30 - 1)[0].size == 0
 
 
 def test_crossings_of_only_the_triangles_whose_boxes_hold_rows_are_all_crossings(monkeypatch):
