@@ -545,14 +545,14 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     table, bits, corner_ids, coords, count = _number_corner_vertices(table, bits, anchors, sides, prefix, box_lo,
                                                                      bricks, directory, 6 * coarse.shape[0])
     split_ids = np.empty((coarse.shape[0], 18), dtype=np.int32)
-    # Three kernels, not one: a parallel kernel called from a cached one segfaults when loaded
-    # from the cache (numba issue #8578).
+    # Serial and parallel kernels called in turn from here, not one from another: a parallel
+    # kernel called from a cached one segfaults when loaded from the cache (numba issue #8578).
     _edge_midpoint_ids(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse, split_ids)
     # Face centres: a face gets its centre if the rule of a leaf sharing it asks.  The rules
     # read only the face's edges, the same for both leaves, and minimal asks imply eager asks,
     # so a leaf whose rule does not ask finds a centre only from an eager leaf, numbered in the
-    # first phase: the ids of the numbering leaf by leaf, with the lookups in parallel and
-    # only the new centres numbered in order.
+    # first phase.  So looking every centre up in parallel, numbering only the new asked ones
+    # in order, then looking the rest up again gives the ids of a leaf-by-leaf numbering.
     rules = FACE_CENTRE_RULES["eager"], FACE_CENTRE_RULES["minimal"]
     asked = _face_centre_ids(table, bits, bricks, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse,
                              split_ids, eager, *rules, False)
