@@ -16,7 +16,7 @@ from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _move_kept,
-                              _place_again, _shift_offsets, _signs, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
+                              _place_again, _row_shifts, _shift_offsets, _signs, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
                               collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
 from paroct.topology import match_faces
 
@@ -473,8 +473,9 @@ def test_group_by_vertex_against_naive(seed):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_in_place_splice_against_concatenation(seed):
-    """_move_kept, _shift_offsets and _place_again put lattice tet t's new tets where the rows
-    stuffed again replace theirs (counts changed, to none included), in place in a buffer with
+    """_move_kept, _shift_offsets (by _row_shifts) and _place_again put lattice tet t's new
+    tets where the rows stuffed again replace theirs (counts changed, to none included), in
+    place in a buffer with
     room for them, as concatenating each lattice tet's tets in order does; flags move with the
     kept tets and are 0 for the others.  Rows at the ends, no rows, blocks moving both ways and
     fewer lattice tets than chunks included."""
@@ -512,9 +513,9 @@ def test_in_place_splice_against_concatenation(seed):
     buffer[:out.shape[0]] = out
     buffer_flags = np.zeros(room, dtype=np.uint8)
     buffer_flags[:out.shape[0]] = flags
-    old_counts = offsets[rows + 1] - offsets[rows]
-    _move_kept(buffer, buffer_flags, offsets, rows, again_offsets)
-    _shift_offsets(offsets, rows, old_counts, again_offsets)
+    shift = _row_shifts(offsets, rows, again_offsets)
+    _move_kept(buffer, buffer_flags, offsets, rows, shift)
+    _shift_offsets(offsets, rows, shift)
     np.testing.assert_array_equal(offsets, np.concatenate([[0], np.cumsum([len(p) for p in pieces])]))
     _place_again(buffer, buffer_flags, offsets[rows], again, again_offsets)
     np.testing.assert_array_equal(buffer[:total], want)

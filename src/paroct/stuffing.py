@@ -760,18 +760,25 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
                                         flat_ok)
-    old_counts = np.take(offsets, rows + 1) - np.take(offsets, rows)
-    total = int(offsets[-1] + again_offsets[-1] - old_counts.sum())
+    shift = _row_shifts(offsets, rows, again_offsets)
+    total = int(offsets[-1] + shift[-1])
     if total > out.shape[0]:
         out = np.concatenate([out, np.empty((total - out.shape[0], 4), dtype=np.int32)])
         flags = np.concatenate([flags, np.zeros(total - flags.shape[0], dtype=np.uint8)])
-    _move_kept(out, flags, offsets, rows, again_offsets)
-    _shift_offsets(offsets, rows, old_counts, again_offsets)
+    _move_kept(out, flags, offsets, rows, shift)
+    _shift_offsets(offsets, rows, shift)
     starts = np.take(offsets, rows)
     _place_again(out, flags, starts, again, again_offsets)
-    counts = np.diff(again_offsets)
-    stuffed = np.repeat(starts - again_offsets[:-1], counts) + np.arange(again_offsets[-1])
+    stuffed = np.repeat(starts - again_offsets[:-1], np.diff(again_offsets)) + np.arange(again_offsets[-1])
     return points, out[:total], stuffed, offsets, flags[:total]
+
+
+def _row_shifts(offsets: np.ndarray, rows: np.ndarray, again_offsets: np.ndarray) -> np.ndarray:
+    """shift (R + 1,) int64: how far the tets after lattice tets rows[:j] (sorted) move once
+    those have again_offsets' counts instead of offsets' (what their new counts add)."""
+    shift = np.zeros(rows.shape[0] + 1, dtype=np.int64)
+    np.cumsum(np.diff(again_offsets) - (np.take(offsets, rows + 1) - np.take(offsets, rows)), out=shift[1:])
+    return shift
 
 
 @nb.njit(cache=True)
@@ -786,25 +793,19 @@ def _move_rows(out, flags, start, end, shift):
 
 
 @nb.njit(cache=True)
-def _move_kept(out, flags, offsets, rows, again_offsets):
+def _move_kept(out, flags, offsets, rows, shift):
     """Move the tets of the lattice tets between rows (sorted; runs of them, each one block of
-    out) to where they go once rows' tets have again_offsets' counts.  Blocks moving up go
+    out) by shift (_row_shifts: block j by shift[j]).  Blocks moving up go
     first, from the last; then those moving down, from the first: a block's destination then
     never holds tets not yet moved (destinations keep the blocks' order, and a block moving
     up ends before the next block moving down starts)."""
     n_rows = rows.shape[0]
     n = offsets.shape[0] - 1
-    shift = np.zeros(n_rows + 1, dtype=np.int64)
     start = np.empty(n_rows + 1, dtype=np.int64)
     end = np.empty(n_rows + 1, dtype=np.int64)
     for j in range(n_rows + 1):
-        lo = 0 if j == 0 else rows[j - 1] + 1
-        hi = rows[j] if j < n_rows else n
-        start[j] = offsets[lo]
-        end[j] = offsets[hi]
-        if j < n_rows:
-            r = rows[j]
-            shift[j + 1] = shift[j] + (again_offsets[j + 1] - again_offsets[j]) - (offsets[r + 1] - offsets[r])
+        start[j] = offsets[0 if j == 0 else rows[j - 1] + 1]
+        end[j] = offsets[rows[j] if j < n_rows else n]
     for j in range(n_rows, -1, -1):
         if shift[j] > 0:
             _move_rows(out, flags, start[j], end[j], shift[j])
@@ -814,14 +815,11 @@ def _move_kept(out, flags, offsets, rows, again_offsets):
 
 
 @nb.njit(cache=True, parallel=True)
-def _shift_offsets(offsets, rows, old_counts, again_offsets):
-    """offsets (T + 1,), in place, once lattice tets rows (sorted; old_counts tets each) have
-    again_offsets' counts; in chunks of lattice tets, each starting from the shift of the rows
-    before it."""
+def _shift_offsets(offsets, rows, shift):
+    """offsets (T + 1,), in place, once lattice tets rows (sorted) have their new counts
+    (_row_shifts' shift: what rows[:j] add); in chunks of lattice tets, each starting from the
+    shift of the rows before it."""
     n = offsets.shape[0] - 1
-    shift = np.zeros(rows.shape[0] + 1, dtype=np.int64)  # shift[j]: what rows[:j] add
-    for j in range(rows.shape[0]):
-        shift[j + 1] = shift[j] + (again_offsets[j + 1] - again_offsets[j]) - old_counts[j]
     n_chunks = min(n, TET_CHUNKS)
     for c in nb.prange(n_chunks):
         t0 = c * n // n_chunks
