@@ -150,23 +150,33 @@ def test_dense_bricked_and_hashed_vertex_numbering_agree(monkeypatch, seed):
     # A second tree far away leaves the box mostly empty, as a band refined locally does.
     anchors = np.concatenate([anchors, anchors + np.array([400, 16, 192])])
     sides = np.concatenate([sides, sides])
-    box_lo, box_hi = anchors.min(axis=0), (anchors + sides[:, None]).max(axis=0)
     side, slots = lattice._BRICK_SIDE, lattice._BRICK_SLOTS
+    box_lo, box_hi = anchors.min(axis=0) // side * side, (anchors + sides[:, None]).max(axis=0)  # as number_vertices
     bricks = (box_hi - box_lo + side) // side
-    directory, placed = lattice._brick_directory(anchors, sides, np.zeros((0, 3), dtype=np.int64), box_lo, bricks)
-    # Slow twin: the bricks placed are exactly those holding a leaf point.
-    points = [a + np.array(o) * (s // 2) for a, s in zip(anchors, sides) for o in itertools.product(range(3), repeat=3)]
-    brick_of = [tuple((p - box_lo) // side) for p in points]
-    held = sorted({(b[2] * bricks[1] + b[1]) * bricks[0] + b[0] for b in brick_of})
-    assert np.array_equal(np.flatnonzero(directory >= 0), held) and placed == len(held)
-    assert np.array_equal(directory[held], np.arange(placed))
+    directory, used = lattice._brick_directory(anchors, sides, np.zeros((0, 3), dtype=np.int64), box_lo, bricks)
+    # Slow twin: the bricks placed are exactly those holding a leaf point, every point in a
+    # brick lies at a multiple of 2**shift from box_lo, and the bricks' slots do not overlap.
+    points = np.array([a + np.array(o) * max(s // 2, 1) for a, s in zip(anchors, sides)
+                       for o in itertools.product(range(3 if s > 1 else 2), repeat=3)])
+    b = (points - box_lo) // side
+    brick_of = (b[:, 2] * bricks[1] + b[:, 1]) * bricks[0] + b[:, 0]
+    held = np.unique(brick_of)
+    assert np.array_equal(np.flatnonzero(directory >= 0), held)
+    shift = directory[brick_of] & lattice._SHIFT_MASK
+    assert np.all((points - box_lo) % (1 << shift)[:, None] == 0)
+    first = directory[held] >> lattice._SHIFT_BITS
+    size = (side >> (directory[held] & lattice._SHIFT_MASK)) ** 3
+    order = np.argsort(first)
+    ends = first[order] + size[order]
+    assert first[order][0] >= 0 and np.all(first[order][1:] >= ends[:-1]) and ends[-1] <= used
+    assert used < slots * len(held) / 2  # the trees' coarse leaves share few slots
     n_bricks = int(np.prod(bricks))
     results = []
     # Whole box, only the bricks in use (a budget the whole box exceeds), and hashing.
-    for per_leaf in (1e9, (n_bricks + slots * placed + 1) / len(sides), 0):
+    for per_leaf in (1e9, (2 * n_bricks + used + 1) / len(sides), 0):
         monkeypatch.setattr(lattice, "DENSE_SLOTS_PER_LEAF", per_leaf)
         results.append(lattice.number_vertices(anchors, sides))
-    assert slots * n_bricks > (n_bricks + slots * placed) * 2  # the middle budget picks the bricks
+    assert slots * n_bricks > (2 * n_bricks + used) * 2  # the middle budget picks the bricks
     dense = results[0]
     for other in results[1:]:
         for a, b in zip((dense.corner_ids, dense.split_ids, dense.coords),

@@ -27,25 +27,31 @@ from .transitions import (
 )
 
 _EMPTY = np.int64(-1)
-#: Number leaf corners through a dense index (4 bytes a lattice point, in bricks of 8^3, BRICK_BITS: only
-#: the bricks that hold a leaf point, found through a directory of 4 bytes a brick of the
-#: leaves' box) when directory and bricks have at most this many slots per leaf, else through
-#: a hash table (16 bytes a slot, at least 8 slots a leaf).  At 64 (256 bytes a leaf, which
-#: emits about six tets) the dense index is 2x faster than hashing on graded meshes and the
-#: bands of curved parts at diag/160 (4-5x on locally refined bands, whose box is mostly
-#: empty); it is freed before stuffing allocates its output.
+#: Number leaf corners through a dense index (4 bytes a lattice point, in bricks of 8^3,
+#: BRICK_BITS: only the bricks that hold a leaf point, each at the resolution of its points,
+#: found through a directory of 8 bytes a brick of the leaves' box) when directory and bricks
+#: have at most this many slots per leaf, else through a hash table (16 bytes a slot, at
+#: least 8 slots a leaf).  At 64 (256 bytes a leaf, which emits about six tets) the dense
+#: index is 2x faster than hashing on graded meshes and the bands of curved parts at diag/160
+#: (4-5x on locally refined bands, whose box is mostly empty); it is freed before stuffing
+#: allocates its output.
 DENSE_SLOTS_PER_LEAF = 64
 _FIB = np.uint64(0x9E3779B97F4A7C15)
 #: A brick of the dense index has 2**BRICK_BITS lattice points along each axis.  Bricks of
-#: 4^3 leave the large local bands' index a quarter as big (fea_part at diag/80: 106 MB for
+#: 4^3 left the large local bands' index a quarter as big (fea_part at diag/80: 106 MB for
 #: 734 k vertices, 2.6 % of its slots used), but numbered them 3 % slower warm and no faster
-#: cold (session 27): the index is not at the mesh's peak.
+#: cold (session 27).  Bricks at their points' resolution (session 29) take it to 16 MB, and
+#: number it 1.5x faster: a coarse leaf's points then share a few cache lines.
 BRICK_BITS = 3
 _BRICK_SIDE = 1 << BRICK_BITS
 _BRICK_SLOTS = 1 << (3 * BRICK_BITS)
 #: Bits of a brick coordinate spread to every third bit: a point's Morton index in its brick.
 _SPREAD = np.array([sum(((i >> b) & 1) << (3 * b) for b in range(BRICK_BITS)) for i in range(_BRICK_SIDE)],
                    dtype=np.int64)
+#: Low bits of a brick directory entry holding the brick's resolution shift (0..BRICK_BITS).
+_SHIFT_BITS = 2
+_SHIFT_MASK = (1 << _SHIFT_BITS) - 1
+assert BRICK_BITS <= _SHIFT_MASK
 
 
 @nb.njit(cache=True, inline="always")
@@ -65,11 +71,11 @@ def _box_brick(x, y, z, box_lo, bricks):
 
 
 def _dense_slot(x, y, z, box_lo, bricks, directory):
-    """Index of a point of the box in the dense index: its brick's place times the slots of a
-    brick, plus its Morton order inside the brick, so leaves visited in Morton order touch few
-    cache lines.
-    The brick's place is its index in the box (directory None: every brick is in the index),
-    or directory[that index] (_brick_directory: only the bricks holding leaf points are)."""
+    """Index of a point of the box in the dense index: its brick's first slot plus its Morton
+    order inside the brick, so leaves visited in Morton order touch few cache lines.
+    directory None: every brick of the box is in the index, in box order, with _BRICK_SLOTS
+    slots; else directory[the brick's index in the box] gives its first slot and resolution
+    (_brick_directory: only the bricks holding leaf points are in the index)."""
     raise NotImplementedError("compiled only: see _overload_dense_slot")
 
 
@@ -86,16 +92,61 @@ def _overload_dense_slot(x, y, z, box_lo, bricks, directory):
     if isinstance(directory, types.NoneType):
         # Chosen at compile time: the whole box costs no directory load per point.
         return lambda x, y, z, box_lo, bricks, directory: _in_brick(_box_brick(x, y, z, box_lo, bricks), x, y, z, box_lo)
-    return lambda x, y, z, box_lo, bricks, directory: _in_brick(
-        np.int64(directory[_box_brick(x, y, z, box_lo, bricks)]), x, y, z, box_lo)
+    return lambda x, y, z, box_lo, bricks, directory: _in_coarse_brick(
+        directory[_box_brick(x, y, z, box_lo, bricks)], x, y, z, box_lo)
+
+
+@nb.njit(cache=True, inline="always")
+def _in_coarse_brick(entry, x, y, z, box_lo):
+    """Slot of a point in the brick of a directory entry (_brick_directory: its first slot and
+    the resolution shift of its points), Morton order inside."""
+    shift = entry & _SHIFT_MASK
+    mask = _BRICK_SIDE - 1
+    return (entry >> _SHIFT_BITS) + (_SPREAD[((x - box_lo[0]) & mask) >> shift]
+                                     | (_SPREAD[((y - box_lo[1]) & mask) >> shift] << 1)
+                                     | (_SPREAD[((z - box_lo[2]) & mask) >> shift] << 2))
+
+
+@nb.njit(cache=True, inline="always")
+def _resolution(offset_bits):
+    """Largest shift up to BRICK_BITS such that offset_bits is a multiple of 2**shift."""
+    shift = 0
+    while shift < BRICK_BITS and (offset_bits >> shift) & 1 == 0:
+        shift += 1
+    return shift
+
+
+@nb.njit(cache=True, inline="always")
+def _place_brick(directory, b, shift, slots):
+    """Give brick b slots for points of resolution shift (_brick_directory), from slot
+    ``slots`` on, unless it has them already; returns the slots given so far.  A brick placed
+    for coarser points is placed again (the table is empty yet: its first slots just go
+    unused, fewer than an eighth of the brick's new ones)."""
+    entry = directory[b]
+    if entry < 0 or (entry & _SHIFT_MASK) > shift:
+        directory[b] = (slots << _SHIFT_BITS) | shift
+        slots += np.int64(1) << (3 * (BRICK_BITS - shift))
+    return slots
 
 
 @nb.njit(cache=True)
 def _brick_directory(anchors, sides, prefix, box_lo, bricks):
-    """Place (n_bricks,) int32 in the dense index of each brick of the box that holds a leaf
-    point (corners, and for leaves of side >= 2 the split points at half sides) or a prefix
-    point, in brick order; -1 for the others.  Returns (directory, number of bricks placed)."""
-    directory = np.full(bricks[0] * bricks[1] * bricks[2], -1, dtype=np.int32)
+    """The entry (n_bricks,) int64 of each brick of the box that holds a leaf point (corners,
+    and for leaves of side >= 2 the split points at half sides) or a prefix point, -1 for the
+    others: (first slot << _SHIFT_BITS) | shift, where every point in the brick lies at a
+    multiple of 2**shift from box_lo (a multiple of the brick side) along each axis, so the
+    brick has (_BRICK_SIDE >> shift)**3 slots, placed in the order the prefix and then the
+    leaves first hold a point in them (close to Morton order, so leaves visit few cache lines).
+    A brick of coarse leaves only (a band refined locally is mostly those) has a few slots,
+    not _BRICK_SLOTS: fea_part's local band at diag/80 takes 4 M slots, not 28 M.
+    Every point looked up must be such a point (as the numbering kernels' are): another point
+    of a coarse brick shares a slot.  Returns (directory, slots in all)."""
+    directory = np.full(bricks[0] * bricks[1] * bricks[2], -1, dtype=np.int64)
+    slots = 0
+    for i in range(prefix.shape[0]):
+        slots = _place_brick(directory, _box_brick(prefix[i, 0], prefix[i, 1], prefix[i, 2], box_lo, bricks),
+                             _resolution((prefix[i, 0] - box_lo[0]) | (prefix[i, 1] - box_lo[1])
+                                         | (prefix[i, 2] - box_lo[2])), slots)
     lo = np.empty(3, dtype=np.int64)
     hi = np.empty(3, dtype=np.int64)
     for i in range(anchors.shape[0]):
@@ -103,22 +154,21 @@ def _brick_directory(anchors, sides, prefix, box_lo, bricks):
         # for most small leaves; a leaf of side 16 or more skips the bricks between its
         # points (at 0, side / 2 and side along each axis).
         s = sides[i]
+        bits = max(np.int64(1), s // 2)  # spacing of the leaf's points
         for k in range(3):
             lo[k] = (anchors[i, k] - box_lo[k]) >> BRICK_BITS
             hi[k] = (anchors[i, k] + s - box_lo[k]) >> BRICK_BITS
+            bits |= anchors[i, k] - box_lo[k]
+        shift = _resolution(bits)
+        if lo[0] == hi[0] and lo[1] == hi[1] and lo[2] == hi[2]:  # most leaves: no loop
+            slots = _place_brick(directory, (lo[2] * bricks[1] + lo[1]) * bricks[0] + lo[0], shift, slots)
+            continue
         step = max(np.int64(1), (s // 2) >> BRICK_BITS)
         for bz in range(lo[2], hi[2] + 1, step):
             for by in range(lo[1], hi[1] + 1, step):
                 for bx in range(lo[0], hi[0] + 1, step):
-                    directory[(bz * bricks[1] + by) * bricks[0] + bx] = 0
-    for i in range(prefix.shape[0]):
-        directory[_box_brick(prefix[i, 0], prefix[i, 1], prefix[i, 2], box_lo, bricks)] = 0
-    placed = 0
-    for b in range(directory.shape[0]):
-        if directory[b] == 0:
-            directory[b] = placed
-            placed += 1
-    return directory, placed
+                    slots = _place_brick(directory, (bz * bricks[1] + by) * bricks[0] + bx, shift, slots)
+    return directory, slots
 
 
 def _vertex_id(table, bits, bricks, box_lo, directory, x, y, z, next_id, add):
@@ -529,13 +579,15 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
         if _BRICK_SLOTS * n_bricks <= budget:
             table, bits, directory = np.zeros(_BRICK_SLOTS * int(n_bricks), dtype=np.int32), 0, None
         elif n_bricks <= budget:
+            box_lo &= ~np.int64(_BRICK_SIDE - 1)  # bricks aligned: coarse leaves' points share few slots
+            bricks = (box_hi - box_lo + _BRICK_SIDE) // _BRICK_SIDE
             # A box mostly empty, as around a band refined locally: only the bricks in use.
-            directory, placed = _brick_directory(anchors, sides, prefix, box_lo, bricks)
-            if directory.shape[0] + _BRICK_SLOTS * placed <= budget:
-                table, bits = np.zeros(_BRICK_SLOTS * placed, dtype=np.int32), 0
+            directory, slots = _brick_directory(anchors, sides, prefix, box_lo, bricks)
+            if 2 * directory.shape[0] + slots <= budget:  # an entry takes two slots' bytes
+                table, bits = np.zeros(slots, dtype=np.int32), 0
     if table is None:  # hashing reads no directory (not even one that did not fit)
         bits = max(4, int(4 * anchors.shape[0] + prefix.shape[0] + 16 - 1).bit_length())
-        table, directory = np.full((1 << bits, 2), _EMPTY, dtype=np.int64), np.zeros(0, dtype=np.int32)
+        table, directory = np.full((1 << bits, 2), _EMPTY, dtype=np.int64), np.zeros(0, dtype=np.int64)
     # A copy: broadcast_to's view is read-only, and numba compiles the numbering kernels again (4-5 s)
     # for a read-only array.
     eager = np.array(np.broadcast_to(np.asarray(eager, dtype=np.bool_), sides.shape))
