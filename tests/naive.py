@@ -462,3 +462,31 @@ def group_by_vertex(vertices: np.ndarray, owners: np.ndarray) -> list[list[int]]
     column's rows in order."""
     return [[r for c in range(owners.shape[1]) for r in range(owners.shape[0]) if owners[r, c] == v]
             for v in vertices]
+
+
+def retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points, inside,
+             coords, table, prism, lo, hi, min_ratio, sweeps):
+    """stuffing._retarget without skipping any vertex: each sweep scores every vertex's star
+    and, where it is bad, tries every option (in place, as _retarget)."""
+    from paroct.stuffing import _set_warp, _star_score
+
+    for _ in range(sweeps):
+        moved = 0
+        for i, v in enumerate(vertices):
+            star = stars[star_first[i]:star_first[i + 1]]
+            score = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+            if score[0] <= 0 and score[1] >= min_ratio:
+                continue
+            current = best_target = targets[v]
+            best = score
+            for e in [*options[option_first[i]:option_first[i + 1]], -1]:
+                if e == current:
+                    continue
+                _set_warp(v, e, signs, targets, points, lattice_points, inside)
+                w, r = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+                if w < best[0] or (w == best[0] and r > best[1]):
+                    best, best_target = (w, r), e
+            _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
+            moved += best_target != current
+        if moved == 0:
+            break

@@ -16,12 +16,13 @@ from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _move_kept,
-                              _place_again, _row_shifts, _shift_offsets, _signs, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
+                              _place_again, _retarget, _row_shifts, _shift_offsets, _signs, _star_options, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
                               collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
-from paroct.topology import match_faces
+from paroct.topology import match_faces, touching
 
 from .naive import cut_edges as naive_cut_edges
 from .naive import group_by_vertex as naive_group_by_vertex
+from .naive import retarget as naive_retarget
 from .naive import star_violation
 from .naive import warp_targets as naive_warp_targets
 from .test_grading import _random_balanced_tree
@@ -520,6 +521,64 @@ def test_in_place_splice_against_concatenation(seed):
     _place_again(buffer, buffer_flags, offsets[rows], again, again_offsets)
     np.testing.assert_array_equal(buffer[:total], want)
     np.testing.assert_array_equal(buffer_flags[:total], np.concatenate(flag_pieces) if flag_pieces else [])
+
+
+def _stars(tets, vertices, n_points):
+    """Stars of the vertices (sorted) as retarget_warps groups them: (first, rows of tets)."""
+    marked = np.zeros(n_points, dtype=bool)
+    marked[vertices] = True
+    rows = np.flatnonzero(touching(tets, marked))
+    first, grouped = _group_by_vertex(vertices, marked, np.take(tets, rows, axis=0))
+    return first, rows[grouped], marked
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_star_options_are_each_vertex_cut_edges_in_order(seed):
+    """_star_options finds a vertex's cut edges through the edge table from its star's tets:
+    the same groups, in the same order (the edges it starts, then those it ends), as grouping
+    every cut edge by its ends; vertices with no cut edge (inside the solid) included."""
+    rng = np.random.default_rng(950 + seed)
+    found = 0
+    for k in range(4):
+        coords, tets, _, (x, inside, cuts, _) = _sphere_cuts(seed, k)
+        ends = np.unique(np.concatenate([cuts.starts, cuts.ends]))
+        vertices = np.unique(np.concatenate([rng.choice(ends, size=min(40, ends.size), replace=False),
+                                             rng.integers(0, x.shape[0], 10)])).astype(np.int64)
+        star_first, stars, marked = _stars(tets, vertices, x.shape[0])
+        first, options = _star_options(vertices, star_first, stars, tets, cuts.starts, *cuts.table)
+        want_first, want = _group_by_vertex(vertices, marked, np.stack((cuts.starts, cuts.ends), axis=1))
+        np.testing.assert_array_equal(first, want_first)
+        np.testing.assert_array_equal(options, want)
+        found += options.size
+    assert found > 100
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_retarget_skips_only_stars_that_did_not_change(seed):
+    """_retarget skips a vertex whose star's vertices did not move since its last visit; the
+    slow twin visits every vertex in every sweep.  The warps, signs and points they leave agree
+    exactly, on spheres where some vertices move more than once."""
+    moved = 0
+    for k in range(6):
+        coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+        points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+        worst = _violations(points, out, coords) + (_radius_ratios(points, out, coords) < 0.15)
+        if not worst.any():
+            continue
+        owners = np.searchsorted(offsets, np.nonzero(worst)[0], side="right") - 1
+        vertices = np.unique(tets[owners].ravel()).astype(np.int64)
+        star_first, stars, _ = _stars(tets, vertices, x.shape[0])
+        option_first, options = _star_options(vertices, star_first, stars, tets, cuts.starts, *cuts.table)
+        results = []
+        for search in (_retarget, naive_retarget):
+            new, signs, warped = targets.copy(), _signs(inside, targets), points.copy()
+            search(vertices, star_first, stars, option_first, options, tets, signs, new, warped, x, inside, coords,
+                   cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], 0.15, stuffing.RETARGET_SWEEPS)
+            results.append((new, signs, warped))
+        for a, b in zip(*results):
+            np.testing.assert_array_equal(a, b)
+        moved += np.count_nonzero(results[0][0] != targets)
+    assert moved > 0
 
 
 def test_retarget_warps_mends_needles_and_keeps_the_bound_first():

@@ -897,13 +897,23 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
     with 3r/R below min_ratio, the warp (none, or onto the cut point of one of its cut edges)
     that brings the star's worst violation lowest, ties to the largest smallest 3r/R (needles:
     their angles can be good); sweeps until nothing changes.  Changes signs, targets and
-    points in place."""
+    points in place.
+
+    A vertex whose star's vertices have not moved since it was last visited is skipped: its
+    star scores as then, and the choice it made then (the first best) stays the first best."""
+    n = vertices.shape[0]
+    moved_at = np.zeros(n, dtype=np.int64)  # the move count just after vertices[i] last moved
+    visited_at = np.full(n, -1, dtype=np.int64)  # the move count when vertices[i] was last visited
+    moves = 0
     for _ in range(sweeps):
         moved = 0
-        for i in range(vertices.shape[0]):
+        for i in range(n):
             v = vertices[i]
             star = stars[star_first[i]:star_first[i + 1]]
+            if visited_at[i] >= 0 and not _star_moved_since(star, tets, vertices, moved_at, visited_at[i]):
+                continue
             worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+            visited_at[i] = moves
             if worst <= 0 and thinnest >= min_ratio:
                 continue
             current = targets[v]
@@ -919,8 +929,23 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
             _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
             if best_target != current:
                 moved += 1
+                moves += 1
+                moved_at[i] = moves
+                visited_at[i] = moves
         if moved == 0:
             break
+
+
+@nb.njit(cache=True)
+def _star_moved_since(star, tets, vertices, moved_at, since):
+    """Whether a vertex of the tets star (rows of tets) is one of vertices (sorted) that
+    moved after move count since (_retarget)."""
+    for t in star:
+        for k in range(4):
+            i = np.searchsorted(vertices, tets[t, k])
+            if i < vertices.shape[0] and vertices[i] == tets[t, k] and moved_at[i] > since:
+                return True
+    return False
 
 
 @nb.njit(cache=True)
@@ -945,6 +970,49 @@ def _group_by_vertex(vertices, marked, owners):
                 grouped[fill[i]] = r
                 fill[i] += 1
     return first, grouped
+
+
+@nb.njit(cache=True)
+def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain):
+    """The cut edges of each vertex, grouped as _group_by_vertex groups the rows of (starts,
+    ends): group i, those of vertices[i], is options[first[i]:first[i + 1]], first the edges
+    it starts, then those it ends, each in edge order.  Each vertex's edges are found through
+    the edge table (collect_cut_edges' head, upper, chain) from the tets of its star
+    (stars[star_first[i]:star_first[i + 1]], rows of tets): every cut edge is an edge of
+    the tets it came from.  Returns (first (G + 1,), options) int64."""
+    n = vertices.shape[0]
+    first = np.zeros(n + 1, dtype=np.int64)
+    found = np.empty(0, dtype=np.int64)
+    for fill in range(2):
+        if fill:
+            for i in range(n):
+                first[i + 1] += first[i]
+            found = np.empty(first[n], dtype=np.int64)
+        for i in range(n):
+            v = vertices[i]
+            star = stars[star_first[i]:star_first[i + 1]]
+            edges = np.empty(3 * star.shape[0], dtype=np.int64)
+            m = 0
+            for t in star:
+                for k in range(4):
+                    w = tets[t, k]
+                    if w == v:
+                        continue
+                    e = _edge_of(head, upper, chain, min(v, w), max(v, w))
+                    if e >= 0:
+                        edges[m] = e
+                        m += 1
+            edges = np.unique(edges[:m])
+            if not fill:
+                first[i + 1] = edges.shape[0]
+                continue
+            j = first[i]
+            for started in (True, False):
+                for e in edges:
+                    if (starts[e] == v) == started:
+                        found[j] = e
+                        j += 1
+    return first, found
 
 
 #: Passes over the candidate vertices retarget_warps makes at most.
@@ -984,7 +1052,7 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     star_first, star_rows = _group_by_vertex(vertices, marked, np.take(tets, rows, axis=0))
     stars = rows[star_rows]
     # A vertex's options: the cut edges it starts, then those it ends, each in order.
-    option_first, options = _group_by_vertex(vertices, marked, np.stack((cuts.starts, cuts.ends), axis=1))
+    option_first, options = _star_options(vertices, star_first, stars, tets, cuts.starts, *cuts.table)
     _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points, inside,
               coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio), RETARGET_SWEEPS)
     return new, int(np.count_nonzero(new != targets))
