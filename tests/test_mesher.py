@@ -164,6 +164,7 @@ def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):
     fin's passes, whose band changes level, it finds the bad tets and needles that measuring
     every tet finds."""
     from paroct import mesher
+    from paroct.quality import NEEDLE, OUTSIDE
     from paroct.repair import band_mask
 
     calls = []
@@ -177,7 +178,7 @@ def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):
         copied = ~band_mask(tets, core)
         assert not (outside | needle)[copied].any()
         assert q.min_dihedral[copied].min(initial=90) > 30 - 1e-9 and q.radius_ratio[copied].min(initial=1) >= 0.4
-        np.testing.assert_array_equal(got, np.where(outside, mesher.OUTSIDE, np.where(needle, mesher.NEEDLE, 0)))
+        np.testing.assert_array_equal(got, np.where(outside, OUTSIDE, np.where(needle, NEEDLE, 0)))
         calls.append((int(copied.sum()), int((outside | needle).sum())))
         return got
 
@@ -323,10 +324,11 @@ def test_summary_reduces_tet_quality_exactly(seed):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_dihedral_outliers_are_tet_qualitys_verdicts(seed):
+def test_outlier_flags_are_tet_qualitys_verdicts(seed):
     """The cosine shortcut decides as the angles in degrees do: random tets (some inverted),
-    flat ones, and bounds set exactly at measured angles."""
-    from paroct.quality import dihedral_outliers
+    flat ones, and bounds set exactly at measured angles; tets of four skipped vertices get 0,
+    the others their verdicts."""
+    from paroct.quality import NEEDLE, OUTSIDE, outlier_flags
 
     rng = np.random.default_rng(seed)
     points = np.concatenate([rng.normal(size=(60, 3)), [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]])
@@ -336,14 +338,20 @@ def test_dihedral_outliers_are_tet_qualitys_verdicts(seed):
     tets[flip] = tets[flip][:, [1, 0, 2, 3]]
     q = tet_quality(points, tets)
     assert (q.volume[20:-1] > 0).all() and (q.volume[:20] < 0).any()
-    seen = np.zeros(3, dtype=int)
+    skip = rng.random(len(points)) < 0.7
+    skip[60:] = False
+    skipped = skip[tets].all(axis=1)
+    assert 0 < skipped.sum() < len(tets) / 2
+    seen = np.zeros(4, dtype=int)
     for lo, hi, ratio in [(10.7, 164.8, 0.05), (float(q.min_dihedral[30]), float(q.max_dihedral[50]), 0.2),
                           (1.0, 179.0, float(q.radius_ratio[90]))]:
-        outside, needle = dihedral_outliers(points, tets, lo, hi, ratio)
         bad = (q.min_dihedral < lo) | (q.max_dihedral > hi)
-        assert np.array_equal(outside, bad) and np.array_equal(needle, ~bad & (q.radius_ratio < ratio))
-        assert outside[-1]  # the flat tet
-        seen += [outside.sum(), (~outside).sum(), needle.sum()]
+        want = np.where(bad, OUTSIDE, np.where(q.radius_ratio < ratio, NEEDLE, 0))
+        np.testing.assert_array_equal(outlier_flags(points, tets, np.zeros(len(points), dtype=bool), lo, hi, ratio), want)
+        got = outlier_flags(points, tets, skip, lo, hi, ratio)
+        np.testing.assert_array_equal(got, np.where(skipped, 0, want))
+        assert got[-1] == OUTSIDE  # the flat tet
+        seen += [(want == OUTSIDE).sum(), (want == 0).sum(), (want == NEEDLE).sum(), (want[skipped] > 0).sum()]
     assert seen.all()  # every verdict was given
 
 

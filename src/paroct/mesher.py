@@ -24,8 +24,8 @@ from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_l
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, ancestor_keys, morton_key, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
 from .octree import FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells
-from .quality import dihedral_outliers, summarize
-from .repair import band_mask, remove_pinches
+from .quality import OUTSIDE, outlier_flags, summarize
+from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
                        stuff, warp_targets)
@@ -780,23 +780,14 @@ def _core(inside: np.ndarray, targets: np.ndarray, n_points: int) -> np.ndarray:
     return core
 
 
-#: Flags _outside_bound gives a tet: a dihedral angle outside DIHEDRAL_BOUND; else 3r/R below NEEDLE_RATIO.
-OUTSIDE, NEEDLE = 1, 2
-
-
 def _outside_bound(points: np.ndarray, tets: np.ndarray, core: np.ndarray) -> np.ndarray:
     """Flags (M,) uint8 of the tets: OUTSIDE with a dihedral angle outside DIHEDRAL_BOUND
     (folded and flat ones included: 0 and 180 degrees), NEEDLE for the others with 3r/R below
-    NEEDLE_RATIO, else 0.  core: _core's mask.  Tets of four core vertices are lattice tets
-    stuffing copied, fat tets and transition templates (dihedral angles in [30, 135] degrees,
-    3r/R >= 0.4: docs/transitions.md), so only the band's are measured (half of round_rod's
-    4.05 M tets at diag/80, the band of a thin rod)."""
-    measured = band_mask(tets, core)
-    bad, thin = dihedral_outliers(points, np.compress(measured, tets, axis=0),  # compress: 3x a fancy index
-                                  DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], NEEDLE_RATIO)
-    flags = np.zeros(tets.shape[0], dtype=np.uint8)
-    flags[measured] = np.where(bad, OUTSIDE, np.where(thin, NEEDLE, 0))
-    return flags
+    NEEDLE_RATIO, else 0 (quality.outlier_flags).  core: _core's mask.  Tets of four core
+    vertices are lattice tets stuffing copied, fat tets and transition templates (dihedral
+    angles in [30, 135] degrees, 3r/R >= 0.4: docs/transitions.md), so only the band's are
+    measured (half of round_rod's 4.05 M tets at diag/80, the band of a thin rod)."""
+    return outlier_flags(points, tets, core, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], NEEDLE_RATIO)
 
 
 def _leaf_levels(frame: FatFrame, levels: np.ndarray) -> tuple:

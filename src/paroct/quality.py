@@ -138,14 +138,8 @@ def _degrees_above(cosine, cos_bound, bound):
 
 
 @nb.njit(cache=True, parallel=True)
-def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max_dihedral, bounds, outside, needle):
-    """Per-tet measures into volume .. max_dihedral (M,); or, with outside and needle (M,)
-    non-empty, only the verdicts on bounds = (lo, hi degrees, min 3r/R), from the cosines
-    (dihedral_outliers)."""
-    verdicts = outside.shape[0] > 0
-    lo, hi, min_ratio = bounds[0], bounds[1], bounds[2]
-    cos_lo = math.cos(math.radians(lo))
-    cos_hi = math.cos(math.radians(hi))
+def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max_dihedral):
+    """Per-tet measures into volume .. max_dihedral (M,)."""
     m = tets.shape[0]
     for chunk in nb.prange(n_chunks):
         corners = np.empty((12, BLOCK))
@@ -154,33 +148,68 @@ def _tet_quality(points, tets, n_chunks, volume, radius_ratio, min_dihedral, max
         for start in range(m * chunk // n_chunks, end, BLOCK):
             n = _measure_tets(points, tets, start, end, corners, out)
             for j in range(n):
-                if verdicts:
-                    # The smallest angle has the largest cosine; an angle above hi, a cosine below cos(hi).
-                    bad = _degrees_below(out[_COS_HI, j], cos_lo, lo) or _degrees_above(out[_COS_LO, j], cos_hi, hi)
-                    outside[start + j] = bad
-                    needle[start + j] = not bad and out[_RATIO, j] < min_ratio
-                    continue
                 volume[start + j] = out[_VOL, j]
                 radius_ratio[start + j] = out[_RATIO, j]
                 min_dihedral[start + j] = _degrees(out[_COS_HI, j])
                 max_dihedral[start + j] = _degrees(out[_COS_LO, j])
 
 
-def dihedral_outliers(points: np.ndarray, tets: np.ndarray, lo: float, hi: float,
-                      min_ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """Masks (M,) of the tets with a dihedral angle below lo or above hi degrees (folded and
-    flat ones included: 0 and 180 degrees, as tet_quality gives them), and of the others
-    with 3r/R below min_ratio: tet_quality's verdicts without its per-tet arrays or acos."""
+#: Flags outlier_flags gives a tet: a dihedral angle outside the bounds; else 3r/R below the floor.
+OUTSIDE, NEEDLE = 1, 2
+
+
+@nb.njit(cache=True, parallel=True)
+def _outlier_flags(points, tets, skip, n_chunks, bounds, flags):
+    """outlier_flags' kernel: each chunk of tets gathers the tets it measures into blocks of
+    BLOCK (their vertex rows copied, then _gather), so skipped tets cost no measuring."""
+    lo, hi, min_ratio = bounds[0], bounds[1], bounds[2]
+    cos_lo = math.cos(math.radians(lo))
+    cos_hi = math.cos(math.radians(hi))
+    m = tets.shape[0]
+    for chunk in nb.prange(n_chunks):
+        corners = np.empty((12, BLOCK))
+        out = np.empty((4, BLOCK))
+        block = np.empty((BLOCK, 4), dtype=tets.dtype)
+        rows = np.empty(BLOCK, dtype=np.int64)
+        t = m * chunk // n_chunks
+        end = m * (chunk + 1) // n_chunks
+        while t < end:
+            n = 0
+            while t < end and n < BLOCK:
+                if skip[tets[t, 0]] and skip[tets[t, 1]] and skip[tets[t, 2]] and skip[tets[t, 3]]:
+                    flags[t] = 0
+                else:
+                    for k in range(4):
+                        block[n, k] = tets[t, k]
+                    rows[n] = t
+                    n += 1
+                t += 1
+            _gather(points, block, 0, n, corners)
+            _measure_block(corners, n, out)
+            for j in range(n):
+                # The smallest angle has the largest cosine; an angle above hi, a cosine below cos(hi).
+                if _degrees_below(out[_COS_HI, j], cos_lo, lo) or _degrees_above(out[_COS_LO, j], cos_hi, hi):
+                    flags[rows[j]] = OUTSIDE
+                else:
+                    flags[rows[j]] = NEEDLE if out[_RATIO, j] < min_ratio else 0
+
+
+def outlier_flags(points: np.ndarray, tets: np.ndarray, skip: np.ndarray, lo: float, hi: float,
+                  min_ratio: float) -> np.ndarray:
+    """Flags (M,) uint8 of the tets: OUTSIDE with a dihedral angle below lo or above hi degrees
+    (folded and flat ones included: 0 and 180 degrees, as tet_quality gives them), NEEDLE for
+    the others with 3r/R below min_ratio, else 0: tet_quality's verdicts without its per-tet
+    arrays or acos.  Tets whose four vertices are marked in skip (N,) bool are not measured
+    and get 0."""
     points = np.ascontiguousarray(points, dtype=np.float64)
     tets = np.ascontiguousarray(tets)
-    m = tets.shape[0]
-    outside = np.empty(m, dtype=np.bool_)
-    needle = np.empty(m, dtype=np.bool_)
-    if m:
-        none = np.empty(0)
-        _tet_quality(points, tets, _chunks(m), none, none, none, none, np.array([lo, hi, min_ratio], dtype=np.float64),
-                     outside, needle)
-    return outside, needle
+    if tets.dtype not in (np.int32, np.int64):
+        tets = tets.astype(np.int64)
+    flags = np.empty(tets.shape[0], dtype=np.uint8)
+    if tets.shape[0]:
+        _outlier_flags(points, tets, np.ascontiguousarray(skip, dtype=np.bool_), _chunks(tets.shape[0]),
+                       np.array([lo, hi, min_ratio], dtype=np.float64), flags)
+    return flags
 
 
 @dataclass(frozen=True)
@@ -203,9 +232,7 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> TetQuality:
     m = tets.shape[0]
     out = TetQuality(np.empty(m), np.empty(m), np.empty(m), np.empty(m))
     if m:
-        no_verdicts = np.empty(0, dtype=np.bool_)
-        _tet_quality(points, tets, _chunks(m), out.volume, out.radius_ratio, out.min_dihedral, out.max_dihedral,
-                     np.zeros(3), no_verdicts, no_verdicts)
+        _tet_quality(points, tets, _chunks(m), out.volume, out.radius_ratio, out.min_dihedral, out.max_dihedral)
     return out
 
 
