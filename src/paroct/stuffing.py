@@ -18,13 +18,15 @@ positions of the cut points (Labelle & Shewchuk, Theorem 1).
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
 from .frame import LATTICE_TO_SPACE
-from .quality import _COS_HI, _COS_LO, _RATIO, _degrees, _gather, _measure_block
+from .quality import _COS_HI, _COS_LO, _RATIO, _degrees, _degrees_above, _degrees_below, _gather, _measure_block
 from .topology import touching
 
 ALPHA_LONG = 0.24999
@@ -862,6 +864,8 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
         return 180.0, 0.0
     worst = 0.0
     thinnest = 1.0
+    cos_lo = math.cos(math.radians(lo))
+    cos_hi = math.cos(math.radians(hi))
     corners = np.empty((12, 1))
     measured = np.empty((4, 1))
     for k in range(out.shape[0]):
@@ -871,11 +875,13 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
             return 180.0, 0.0
         _gather(points, out, k, 1, corners)
         _measure_block(corners, 1, measured)
-        small = _degrees(measured[_COS_HI, 0])
-        large = _degrees(measured[_COS_LO, 0])
-        if small <= 0.0 or large >= 180.0:
-            return 180.0, 0.0  # flat to rounding
-        worst = max(worst, lo - small, large - hi)
+        # Angles in [lo, hi] add nothing to worst (acos only near or past a bound).
+        if _degrees_below(measured[_COS_HI, 0], cos_lo, lo) or _degrees_above(measured[_COS_LO, 0], cos_hi, hi):
+            small = _degrees(measured[_COS_HI, 0])
+            large = _degrees(measured[_COS_LO, 0])
+            if small <= 0.0 or large >= 180.0:
+                return 180.0, 0.0  # flat to rounding
+            worst = max(worst, lo - small, large - hi)
         thinnest = min(thinnest, measured[_RATIO, 0])
     return worst, thinnest
 
@@ -983,6 +989,10 @@ def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain)
     n = vertices.shape[0]
     first = np.zeros(n + 1, dtype=np.int64)
     found = np.empty(0, dtype=np.int64)
+    longest = 0
+    for i in range(n):
+        longest = max(longest, star_first[i + 1] - star_first[i])
+    edges = np.empty(3 * longest, dtype=np.int64)  # a vertex's distinct edges, ascending
     for fill in range(2):
         if fill:
             for i in range(n):
@@ -990,25 +1000,30 @@ def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain)
             found = np.empty(first[n], dtype=np.int64)
         for i in range(n):
             v = vertices[i]
-            star = stars[star_first[i]:star_first[i + 1]]
-            edges = np.empty(3 * star.shape[0], dtype=np.int64)
             m = 0
-            for t in star:
+            for t in stars[star_first[i]:star_first[i + 1]]:
                 for k in range(4):
                     w = tets[t, k]
                     if w == v:
                         continue
                     e = _edge_of(head, upper, chain, min(v, w), max(v, w))
-                    if e >= 0:
-                        edges[m] = e
-                        m += 1
-            edges = np.unique(edges[:m])
+                    if e < 0:
+                        continue
+                    j = m  # insertion into the few edges so far
+                    while j > 0 and edges[j - 1] > e:
+                        j -= 1
+                    if j > 0 and edges[j - 1] == e:
+                        continue
+                    for q in range(m, j, -1):
+                        edges[q] = edges[q - 1]
+                    edges[j] = e
+                    m += 1
             if not fill:
-                first[i + 1] = edges.shape[0]
+                first[i + 1] = m
                 continue
             j = first[i]
             for started in (True, False):
-                for e in edges:
+                for e in edges[:m]:
                     if (starts[e] == v) == started:
                         found[j] = e
                         j += 1
