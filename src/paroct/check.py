@@ -218,30 +218,34 @@ def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _far_from(queries, points, origin, cell, radius, start, order, dims):
+    """far_from_points' queries, in parallel chunks (each writes its own queries' entries)."""
     r2 = radius * radius
-    out = np.zeros(queries.shape[0], dtype=np.bool_)
-    c = np.empty(3, dtype=np.int64)
-    for q in range(queries.shape[0]):
-        for k in range(3):
-            c[k] = np.int64(math.floor((queries[q, k] - origin[k]) / cell))
-        near = False
-        for n in range(27):  # the query's own cell first: most queries have a point there
-            m = (n + 13) % 27
-            i, j, k = c[0] + m // 9 - 1, c[1] + m // 3 % 3 - 1, c[2] + m % 3 - 1
-            if near or not (0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]):
-                continue
-            key = (i * dims[1] + j) * dims[2] + k
-            for s in range(start[key], start[key + 1]):
-                p = order[s]
-                d = 0.0
-                for a in range(3):
-                    d += (points[p, a] - queries[q, a]) ** 2
-                if d <= r2:
-                    near = True
-                    break
-        out[q] = not near
+    n_queries = queries.shape[0]
+    out = np.empty(n_queries, dtype=np.bool_)
+    n_chunks = min(64, n_queries // 1024 + 1)
+    for chunk in nb.prange(n_chunks):
+        c = np.empty(3, dtype=np.int64)
+        for q in range(chunk * n_queries // n_chunks, (chunk + 1) * n_queries // n_chunks):
+            for k in range(3):
+                c[k] = np.int64(math.floor((queries[q, k] - origin[k]) / cell))
+            near = False
+            for n in range(27):  # the query's own cell first: most queries have a point there
+                m = (n + 13) % 27
+                i, j, k = c[0] + m // 9 - 1, c[1] + m // 3 % 3 - 1, c[2] + m % 3 - 1
+                if near or not (0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]):
+                    continue
+                key = (i * dims[1] + j) * dims[2] + k
+                for s in range(start[key], start[key + 1]):
+                    p = order[s]
+                    d = 0.0
+                    for a in range(3):
+                        d += (points[p, a] - queries[q, a]) ** 2
+                    if d <= r2:
+                        near = True
+                        break
+            out[q] = not near
     return out
 
 
