@@ -3,6 +3,7 @@
 import itertools
 
 import manifold3d
+import numba
 import numpy as np
 import pytest
 
@@ -142,6 +143,39 @@ def test_hashed_vertex_numbering_grows_its_table_and_keeps_the_ids(monkeypatch):
     for a, b in zip((dense.corner_ids, dense.coords), (hashed.corner_ids, hashed.coords)):
         assert np.array_equal(a, b)
     assert np.array_equal(dense.coords[dense.corner_ids], anchors[:, None, :] + lattice.CUBE_CORNERS[None, :, :])
+
+
+@numba.njit
+def _summed_axis_parts(table, box_lo, stride, points):
+    out = np.empty((points.shape[0], 2), dtype=np.int64)
+    for i in range(points.shape[0]):
+        out[i] = 0
+        for k in range(3):
+            brick, morton = lattice._axis_part(table, box_lo, stride, k, points[i, k])
+            out[i, 0] += brick
+            out[i, 1] |= morton
+    return out
+
+
+def test_axis_parts_sum_to_the_points_brick_and_morton_index():
+    """Slow twin of _axis_part: the dense index's parts of a point sum to its brick's index in
+    the box (x fastest) and its bits below BRICK_BITS interleaved (x lowest); the hash table's
+    to its Morton key."""
+    rng = np.random.default_rng(7)
+    box_lo, bricks = np.array([-40, 16, 3]), np.array([5, 3, 7])
+    side = lattice._BRICK_SIDE
+    points = box_lo + rng.integers(0, bricks * side, size=(500, 3))
+    stride = np.array([1, bricks[0], bricks[0] * bricks[1]])
+    offsets = points - box_lo
+    b = offsets // side
+    low = offsets % side
+    morton = sum(((low[:, k] >> bit) & 1) << (3 * bit + k) for k in range(3) for bit in range(lattice.BRICK_BITS))
+    dense = _summed_axis_parts(np.zeros(1, dtype=np.int32), box_lo, stride, points)
+    assert np.array_equal(dense[:, 0], (b[:, 2] * bricks[1] + b[:, 1]) * bricks[0] + b[:, 0])
+    assert np.array_equal(dense[:, 1], morton)
+    hashed = _summed_axis_parts(np.zeros((1, 2), dtype=np.int64), box_lo, stride, points - box_lo)
+    assert np.array_equal(hashed[:, 0], np.zeros(len(points)))
+    assert np.array_equal(hashed[:, 1], octant.morton_keys(points - box_lo))
 
 
 @pytest.mark.parametrize("seed", range(3))
