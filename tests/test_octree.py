@@ -12,6 +12,7 @@ from paroct.octree import (
     complete_from_seeds,
     octants_holding,
     octants_within,
+    refine_to_level,
     tree_is_balanced,
     tree_is_complete,
     tree_is_linear,
@@ -201,3 +202,20 @@ def test_octants_within_matches_a_scan(seed):
     want = [any(lo <= lv and int(ko) <= int(k) and _last(k, lv) <= _last(ko, lo) for ko, lo in zip(outer_keys, outer_levels))
             for k, lv in zip(keys, levels)]
     assert got.tolist() == want and any(want) and not all(want)
+
+
+@pytest.mark.parametrize("depth", [0, 1, 2])
+def test_refine_to_level_lists_every_descendant_in_morton_order(depth):
+    """Slow twin: each octant's descendants at level + depth keyed from their anchors, sorted."""
+    rng = np.random.default_rng(40 + depth)
+    level = 5
+    side = 1 << (ML - level)
+    anchors = rng.integers(0, 1 << level, size=(20, 3)) * side
+    keys = np.unique(octant.morton_keys(anchors))
+    child = side >> depth
+    expected = []
+    for x, y, z in octant.morton_decode(keys):
+        below = [octant.morton_keys(np.array([[x + i * child, y + j * child, z + k * child]]))[0]
+                 for i, j, k in itertools.product(range(1 << depth), repeat=3)]
+        expected.extend(sorted(below))
+    assert np.array_equal(refine_to_level(keys, level, level + depth), expected)

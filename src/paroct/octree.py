@@ -21,7 +21,6 @@ from .octant import (
     morton_coords,
     morton_decode,
     morton_key,
-    morton_keys,
     octant_is_ancestor,
     octant_last_key,
     octant_len,
@@ -532,10 +531,11 @@ def refine_to_level(keys: np.ndarray, level_from: int, level_to: int) -> np.ndar
     depth = level_to - level_from
     if depth < 0:
         raise ValueError(f"level_to = {level_to} < level_from = {level_from}")
-    n = 1 << depth
-    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 3)
-    offsets = np.sort(morton_keys(g << (MAX_LEVEL - level_to)))
-    return (keys[:, None] | offsets[None, :]).ravel()
+    # The Morton keys of the 8**depth offsets of a cube's descendants, in order, are the
+    # integers below 8**depth (interleaving maps the cube's offsets onto them), shifted to
+    # level_to.  (Keying a meshgrid of the offsets and sorting took 75-240 us a call.)
+    offsets = np.arange(np.int64(8) ** depth, dtype=np.int64) << np.int64(3 * (MAX_LEVEL - level_to))
+    return (np.asarray(keys, dtype=np.int64)[:, None] | offsets[None, :]).ravel()
 
 
 def complete_from_seeds(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
