@@ -488,11 +488,15 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
 
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     targets[:n_band] = band.targets
-    points, out_tets, _ = stuff(frame.to_space(coords), coords, tets, inside, band.cuts, targets)
+    cuts = band.cuts
+    # Stuffing needs only the coordinates, tets, classes and cut edges: the leaves' corner and
+    # split ids, the leaves and the band's cells are freed before it allocates its output.
+    del vertices, band, keys, levels
+    points, out_tets, _ = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
     stages.done("stuff")
-    # The lattice's tets, vertices and the band's cut-edge tables are done with: freed before
+    # The lattice's tets and coordinates and the cut-edge tables are done with: freed before
     # _finish's face matching allocates its own, they are not in the peak.
-    del vertices, coords, tets, band, keys, levels
+    del coords, tets, cuts
     result = _finish(points, out_tets, inside, targets, report, stages, surface, h)
     lost = _losses(report, surface)
     advice, walls = "", None
