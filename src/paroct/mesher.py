@@ -716,10 +716,13 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     stages.done("classify")
 
     tets = graded_tets(vertices, inside)
+    spacing = vertex_spacing(vertices, sides)
+    # The leaves and their corner and split ids are done with: freed before the cut edges and
+    # stuffing allocate (fea_part at diag/80: 35 MB).
+    del vertices, keys, levels, in_band, sides
     stages.done("emit")
 
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report, buckets)
-    spacing = vertex_spacing(vertices, sides)
     targets = warp_targets(cuts, coords, frame.h, spacing)
     lattice_points = frame.to_space(coords)
     points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
@@ -774,7 +777,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         stages.done("quality")
         return None, asks
     # As in _mesh_at: what stuffing needed is freed before _finish allocates.
-    del vertices, coords, tets, cuts, spacing, lattice_points, keys, levels, in_band, flags, offsets
+    del coords, tets, cuts, spacing, lattice_points, flags, offsets
     return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
 
 
