@@ -713,6 +713,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     inside = np.ones(coords.shape[0], dtype=bool)
     ids = _band_vertex_ids(vertices, in_band)
     inside[ids] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], np.take(coords, ids, axis=0)) > 0
+    del ids
     stages.done("classify")
 
     tets = graded_tets(vertices, inside)
