@@ -302,9 +302,9 @@ def _number_points(table, bits, stride, box_lo, directory, points, start, coords
 @nb.njit(cache=True)
 def _number_corners(table, bits, stride, box_lo, directory, anchors, sides, start, corner_ids, coords, count):
     """Number the corners of leaves start.. into corner_ids (L, 8), as _number_points, from
-    the six axis parts (_axis_part) of each leaf's two planes along each axis.  The lookup is
-    spelled out here and in _add_face_centres: an inlined helper taking the arrays made this
-    loop 1.6-2.6x slower."""
+    the six axis parts (_axis_part) of each leaf's two planes along each axis.  The lookups
+    are inlined overloads: a compiled helper called per leaf with the arrays made this loop
+    1.6-2.6x slower."""
     bricks_at = np.empty((3, 2), dtype=np.int64)
     morton_at = np.empty((3, 2), dtype=np.int64)
     for i in range(start, anchors.shape[0]):
