@@ -449,11 +449,20 @@ def _order_cells(keys, fracs, faces, order):
 def winding_numbers(crossings: RowCrossings, points: np.ndarray) -> np.ndarray:
     """Winding number (N,) int32 of each lattice point (moved by -eps along the direction)."""
     points = np.ascontiguousarray(points, dtype=np.int64)
-    csum = np.zeros(crossings.keys.shape[0] + 1, dtype=np.int64)
-    np.cumsum(crossings.signs, out=csum[1:])
     out = np.empty(points.shape[0], dtype=np.int32)
-    _winding_numbers(crossings.keys, crossings.row_box, crossings.row_starts, csum, row_basis(crossings.direction),
-                     points, out)
+    _winding_numbers(crossings.keys, crossings.row_box, crossings.row_starts, _sign_sums(crossings.signs),
+                     row_basis(crossings.direction), points, out)
+    return out
+
+
+@nb.njit(cache=True)
+def _sign_sums(signs):
+    """Prefix sums (C + 1,) int64 of the crossings' signs (int8), from 0.  (numpy's cumsum of
+    int8 into int64 took 18 us on bunny's 5 k x-crossings at diag/80, most of a call.)"""
+    out = np.empty(signs.shape[0] + 1, dtype=np.int64)
+    out[0] = 0
+    for i in range(signs.shape[0]):
+        out[i + 1] = out[i] + signs[i]
     return out
 
 
