@@ -106,8 +106,11 @@ def _overload_dense_slot(directory, brick, morton):
     if isinstance(directory, types.NoneType):
         # Chosen at compile time: the whole box costs no directory load per point.
         return lambda directory, brick, morton: (brick << (3 * BRICK_BITS)) | morton
-    return lambda directory, brick, morton: ((directory[brick] >> _SHIFT_BITS)
-                                             + (morton >> (3 * (directory[brick] & _SHIFT_MASK))))
+
+    def through_directory(directory, brick, morton):
+        entry = directory[brick]
+        return (entry >> _SHIFT_BITS) + (morton >> (3 * (entry & _SHIFT_MASK)))
+    return through_directory
 
 
 @nb.njit(cache=True, inline="always")
