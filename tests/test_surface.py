@@ -9,8 +9,9 @@ import pytest
 
 from paroct import mesh
 from paroct.errors import ParoctError
-from paroct.surface import _bounding_box, _shell_topology, _weld, load_surface, surface_from_arrays
-from paroct.topology import edge_multiplicities
+from paroct.surface import (_bounding_box, _shell_topology, _shells, _shells_of_one_fan_vertices, _weld, load_surface,
+                            surface_from_arrays)
+from paroct.topology import edge_multiplicities, link_fans, vertex_links
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 
@@ -99,6 +100,32 @@ def test_volume_area_genus_and_shells_match_manifold3d(name):
     assert surface.area == pytest.approx(solid.surface_area(), rel=1e-12)
     assert surface.genus == solid.genus() + (len(solid.decompose()) - 1)  # manifold3d: 1 - chi / 2 over all shells
     assert surface.components == len(solid.decompose())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_shells_by_vertex_search_are_the_union_of_faces_through_edges(seed):
+    """Where every vertex has one fan, _shells_of_one_fan_vertices (a search over the edge
+    graph) labels the faces as the slow twin, _shells (union of faces through edges), does:
+    several shuffled, overlapping and nested solids, shells in order of their first face."""
+    rng = np.random.default_rng(seed)
+    parts = [SOLIDS[name]().translate(rng.normal(size=3) * 0.3) for name in rng.choice(sorted(SOLIDS), size=4)]
+    vertices, faces = [], []
+    for part in parts:
+        v, f = _arrays(part)
+        faces.append(f + sum(len(x) for x in vertices))
+        vertices.append(v)
+    vertices, faces = np.vstack(vertices), np.vstack(faces)
+    order = rng.permutation(faces.shape[0])
+    faces = faces[order].astype(np.int32)
+    start, face_of, nxt, prv = vertex_links(faces, vertices.shape[0])
+    following = np.empty(nxt.shape[0], dtype=np.int32)
+    fans = np.empty(vertices.shape[0], dtype=np.int32)
+    link_fans(start, nxt, prv, following, fans)
+    assert np.all(fans == 1)
+    expected = _shells(start, face_of, nxt, following)
+    assert expected.max() + 1 == sum(len(part.decompose()) for part in parts)
+    assert np.array_equal(_shells_of_one_fan_vertices(start, nxt, faces), expected)
+    assert np.array_equal(_shell_topology(faces, vertices.shape[0])[4], expected)
 
 
 def test_sheets_touching_at_a_vertex_are_two_shells_of_genus_zero():

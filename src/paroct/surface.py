@@ -320,9 +320,52 @@ def _shell_topology(faces: np.ndarray, n_vertices: int) -> tuple[int, int, int, 
     # A parallel kernel called from Python, not from another cached kernel: numba issue #8578
     # (such a call segfaults when loaded from the cache).
     link_fans(start, nxt, prv, following, fans)
-    if fans.min() < 0:
+    fewest = fans.min()
+    if fewest < 0:
         return (*_edge_report(start, nxt), 0, np.empty(0, dtype=np.int64))
+    if fewest == 1 and fans.max() == 1:
+        return 0, 0, 0, n_vertices, _shells_of_one_fan_vertices(start, nxt, faces)
     return 0, 0, 0, int(fans.sum(dtype=np.int64)), _shells(start, face_of, nxt, following)
+
+
+@nb.njit(cache=True)
+def _shells_of_one_fan_vertices(start, nxt, faces):
+    """_shells of a surface whose every vertex is used and has one fan: then the faces around
+    a vertex are joined through their edges, so two faces are joined if and only if their
+    vertices are linked through edges, and the shells are the components of the edge graph
+    (nxt, by vertex).  A search over that graph reads each vertex's slots once; the union
+    of faces through edges (_shells) reads parents at random, and took 3x longer on armadillo."""
+    n = start.shape[0] - 1
+    component = np.full(n, -1, dtype=np.int32)
+    stack = np.empty(n, dtype=np.int32)
+    n_components = 0
+    for root in range(n):
+        if component[root] >= 0:
+            continue
+        component[root] = n_components
+        stack[0] = root
+        top = 1
+        while top > 0:
+            top -= 1
+            v = stack[top]
+            for s in range(start[v], start[v + 1]):
+                w = nxt[s]
+                if component[w] < 0:
+                    component[w] = n_components
+                    stack[top] = w
+                    top += 1
+        n_components += 1
+    # Shells numbered in order of their first face, as _shells does.
+    shell_of = np.full(n_components, -1, dtype=np.int64)
+    label = np.empty(faces.shape[0], dtype=np.int64)
+    n_shells = 0
+    for f in range(faces.shape[0]):
+        c = component[faces[f, 0]]
+        if shell_of[c] < 0:
+            shell_of[c] = n_shells
+            n_shells += 1
+        label[f] = shell_of[c]
+    return label
 
 
 @nb.njit(cache=True)
