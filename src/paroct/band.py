@@ -212,4 +212,4 @@ def local_leaves(frame: FatFrame, band_keys: np.ndarray, band_cell_levels: np.nd
     keys, levels = balance(np.concatenate([band_keys, seeds[0]]), np.concatenate([band_cell_levels, seeds[1]]))
     in_band = octants_within(keys, levels, band_keys, band_cell_levels)
     keep = kept_leaves(frame, keys, levels, in_band, seeds, x_crossings)
-    return keys[keep], levels[keep], in_band[keep]
+    return np.compress(keep, keys), np.compress(keep, levels), np.compress(keep, in_band)

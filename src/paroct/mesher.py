@@ -860,7 +860,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
     corner_class = rays.winding_numbers(x_crossings, corners.coords) > 0
     is_cut = mixed_rows(corners.corner_ids, corner_class)
-    cut_keys = met[is_cut]
+    cut_keys = np.compress(is_cut, met)
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
     cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings, report)
@@ -881,7 +881,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     fine = np.nonzero(levels == finest)[0]
     in_band[fine] = sorted_lookup(band, keys[fine])[1]
     keep = kept_leaves(frame, keys, levels, in_band, seeds, x_crossings)
-    return keys[keep], levels[keep], BandStuffing(cut_cells.coords, inside, cuts, targets)
+    return np.compress(keep, keys), np.compress(keep, levels), BandStuffing(cut_cells.coords, inside, cuts, targets)
 
 
 @nb.njit(cache=True)
