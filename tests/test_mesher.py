@@ -8,7 +8,8 @@ import pytest
 
 from paroct import rays
 from paroct.errors import ParoctError
-from paroct.frame import LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
+from paroct.features import FACING, thin_features
+from paroct.frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
 from paroct.lattice import leaf_tets
 from paroct.mesher import _compact, _cut_points, _used_ids, mesh
 from paroct.octree import octant_lattice_anchors, uniform_leaves
@@ -139,6 +140,23 @@ def test_thin_solid_warns_or_fails_with_advice_when_refinement_is_off():
 
 
 _FIN_PART = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + manifold3d.Manifold.cube([1.0, 0.03, 0.5]).translate([0, 0, 0.5])
+
+
+@pytest.mark.parametrize("facing", [-0.9, -0.6])
+def test_thin_features_filtered_by_facing_are_those_measured_at_it(facing):
+    """One pass of the rows serves the advice (FACING) and the walls to refine (a stricter
+    limit): facing_below gives the samples thin_features finds at that limit, in order."""
+    surface = load_surface(_FIN_PART.rotate([17, 29, 41]) + manifold3d.Manifold.cylinder(0.6, 0.2, 0.05, 24))
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, 0.05)
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.asarray(surface.faces, dtype=np.int64)
+    crossings = {d: rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
+    loose = thin_features(frame, crossings, surface.vertices, faces)
+    strict = thin_features(frame, crossings, surface.vertices, faces, facing)
+    assert np.all(loose.facing < FACING) and 0 < strict.thickness.size < loose.thickness.size
+    got = loose.facing_below(facing)
+    for name in ("thickness", "points", "is_wall", "facing"):
+        assert np.array_equal(getattr(got, name), getattr(strict, name)), name
 
 
 def test_thin_walls_refine_the_boundary_until_two_layers_span_them():

@@ -27,11 +27,13 @@ FACING = -0.5
 
 @nb.njit(cache=True)
 def _facing_pairs(keys, fracs, signs, faces, normals, direction, step, facing):
-    """Per consecutive crossing pair on a row: (first index, thickness, is_wall) where facing."""
+    """Per consecutive crossing pair on a row: (first index, thickness, is_wall, the dot product
+    of the two unit normals) where that product is below facing."""
     n = keys.shape[0]
     first = np.empty(n, dtype=np.int64)
     thick = np.empty(n)
     wall = np.empty(n, dtype=np.bool_)
+    dots = np.empty(n)
     m = 0
     row_mask = ~((np.int64(1) << _KEY_BITS) - 1)
     for i in range(n - 1):
@@ -39,7 +41,8 @@ def _facing_pairs(keys, fracs, signs, faces, normals, direction, step, facing):
             continue
         na = normals[faces[i]]
         nb_ = normals[faces[i + 1]]
-        if na[0] * nb_[0] + na[1] * nb_[1] + na[2] * nb_[2] >= facing:
+        dot = na[0] * nb_[0] + na[1] * nb_[1] + na[2] * nb_[2]
+        if dot >= facing:
             continue
         cells = (keys[i + 1] & ~row_mask) - (keys[i] & ~row_mask)
         length = (cells + fracs[i + 1] - fracs[i]) * step
@@ -47,18 +50,29 @@ def _facing_pairs(keys, fracs, signs, faces, normals, direction, step, facing):
         first[m] = i
         thick[m] = length * cos
         wall[m] = signs[i] > 0
+        dots[m] = dot
         m += 1
-    return first[:m], thick[:m], wall[:m]
+    return first[:m], thick[:m], wall[:m], dots[:m]
 
 
 @dataclass(frozen=True)
 class ThinFeatures:
     """Thickness samples of walls and gaps.  thickness: (K,) model units; points: (K, 3) a
-    point on the first wall of each sample; is_wall: (K,) True for material, False for gap."""
+    point on the first wall of each sample; is_wall: (K,) True for material, False for gap;
+    facing: (K,) the dot product of the two crossed triangles' unit normals (-1 where a
+    sample was not measured along a row)."""
 
     thickness: np.ndarray
     points: np.ndarray
     is_wall: np.ndarray
+    facing: np.ndarray
+
+    def facing_below(self, limit: float) -> ThinFeatures:
+        """The samples whose two sides face each other more squarely: facing below limit.  For
+        a limit below the facing they were taken with, the same samples in the same order as
+        thin_features with facing=limit (one pass of the rows serves both)."""
+        keep = self.facing < limit
+        return ThinFeatures(self.thickness[keep], self.points[keep], self.is_wall[keep], self.facing[keep])
 
     def thinnest(self, walls: bool) -> tuple[float, np.ndarray] | None:
         """The smallest wall (or gap) thickness and where it is, or None if there is none."""
@@ -102,7 +116,8 @@ def thin_features(frame: FatFrame, crossings: dict, vertices: np.ndarray, faces:
         rc: RowCrossings
         vec = EDGE_DIRECTIONS[d] @ LATTICE_TO_SPACE.T
         step = float(np.linalg.norm(vec)) * frame.h
-        first, thick, wall = _facing_pairs(rc.keys, rc.fracs, rc.signs, rc.faces, normals, vec / np.linalg.norm(vec), step, facing)
+        first, thick, wall, dots = _facing_pairs(rc.keys, rc.fracs, rc.signs, rc.faces, normals, vec / np.linalg.norm(vec),
+                                                 step, facing)
         if first.size == 0:
             continue
         # Position of the first crossing: row (p2, p3) and cell j back to lattice coordinates.
@@ -113,7 +128,7 @@ def thin_features(frame: FatFrame, crossings: dict, vertices: np.ndarray, faces:
                        ((key >> (2 * _KEY_BITS)) & mask) - _KEY_OFFSET], axis=1)[:, [0, 2, 1]]
         u = np.linalg.solve(row_basis(d).astype(np.float64), tu.T.astype(np.float64)).T
         u = u + rc.fracs[first][:, None] * EDGE_DIRECTIONS[d]
-        parts.append((thick, frame.to_space(u), wall))
+        parts.append((thick, frame.to_space(u), wall, dots))
     if not parts:
-        return ThinFeatures(np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=bool))
+        return ThinFeatures(np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=bool), np.zeros(0))
     return ThinFeatures(*(np.concatenate(x) for x in zip(*parts)))

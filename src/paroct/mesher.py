@@ -504,8 +504,9 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
         for d in range(EDGE_DIRECTIONS.shape[0]):
             if d not in crossings:
                 crossings[d] = rays.row_crossings(frame, snapped, faces, d)
-        advice = _thin_feature_advice(find_thin_features(frame, crossings, surface.vertices, faces), h)
-        walls = find_thin_features(frame, crossings, surface.vertices, faces, THIN_FACING)
+        features = find_thin_features(frame, crossings, surface.vertices, faces)
+        advice = _thin_feature_advice(features, h)
+        walls = features.facing_below(THIN_FACING)
         if report.missed_vertices.size:
             walls = _with_missed_parts(walls, frame, snapped, faces, report.missed_vertices)
         stages.done("features")
@@ -525,7 +526,8 @@ def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray
     points = frame.to_space(octant_lattice_anchors(cells, frame) + 0.5)
     return ThinFeatures(np.concatenate([walls.thickness, np.zeros(points.shape[0])]),
                         np.concatenate([walls.points, points]),
-                        np.concatenate([walls.is_wall, np.ones(points.shape[0], dtype=bool)]))
+                        np.concatenate([walls.is_wall, np.ones(points.shape[0], dtype=bool)]),
+                        np.concatenate([walls.facing, np.full(points.shape[0], -1.0)]))
 
 
 def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
