@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, morton_key, octants_in_cells, sorted_lookup
+from .octant import MAX_LEVEL, morton_coords, morton_key, octants_in_cells, sorted_lookup
 from .octree import (FaceBuckets, balance, faces_meeting_cells, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
@@ -55,8 +55,12 @@ def band_levels(frame: FatFrame, coarse_level: int, coords: np.ndarray, levels: 
     if coords.shape[0] != levels.shape[0]:
         raise ValueError(f"len(coords) = {coords.shape[0]} but len(levels) = {levels.shape[0]}")
     cells = np.floor(coords / (1 << (frame.levels - coarse_level))).astype(np.int64)
-    packed = _ring_asks(cells, levels, ring, 1 << coarse_level)
-    return _finest_packed(coarse_level, packed)
+    # Many samples share a cell (a wall is sampled by every row that crosses it): the finest
+    # ask of each cell first, so that each ring is asked once (tray_bottom at diag/80: 28 k
+    # samples in 11.5 k cells; 754 k ring asks to sort before, now 311 k).
+    sample_asks = _sample_asks(cells, levels, ring, 1 << coarse_level)
+    sample_asks.sort()
+    return _finest_packed(coarse_level, _ring_asks(sample_asks, ring, 1 << coarse_level))
 
 
 #: Bits of a packed ask below the cell's Morton index (at coarse_level): the level asked for.
@@ -64,22 +68,40 @@ _LEVEL_BITS = 5
 
 
 @nb.njit(cache=True)
-def _ring_asks(cells, levels, ring, n_cells):
-    """Packed asks (Morton index of the cell at its level << _LEVEL_BITS | level) of every cell
-    within ``ring`` of cells (K, 3) (coordinates at coarse_level) inside the 0..n_cells-1 box,
-    for the level asked there."""
-    width = 2 * ring + 1
-    out = np.empty(cells.shape[0] * width ** 3, dtype=np.int64)
+def _sample_asks(cells, levels, ring, n_cells):
+    """Packed asks (Morton index of the cell moved by ``ring`` along each axis, so that cells
+    just outside the box key too, << _LEVEL_BITS | level) of the cells (K, 3) (coordinates at
+    coarse_level) whose ring meets the 0..n_cells-1 box; the others are dropped."""
+    out = np.empty(cells.shape[0], dtype=np.int64)
     n = 0
+    reach = n_cells + 2 * ring
     for i in range(cells.shape[0]):
-        for dx in range(-ring, ring + 1):
-            x = cells[i, 0] + dx
-            for dy in range(-ring, ring + 1):
-                y = cells[i, 1] + dy
-                for dz in range(-ring, ring + 1):
-                    z = cells[i, 2] + dz
+        x, y, z = cells[i, 0] + ring, cells[i, 1] + ring, cells[i, 2] + ring
+        if 0 <= x < reach and 0 <= y < reach and 0 <= z < reach:
+            out[n] = (morton_key(x, y, z) << _LEVEL_BITS) | np.int64(levels[i])
+            n += 1
+    return out[:n]
+
+
+@nb.njit(cache=True)
+def _ring_asks(sample_asks, ring, n_cells):
+    """Packed asks (Morton index of the cell at its level << _LEVEL_BITS | level) of every cell
+    of the 0..n_cells-1 box within ``ring`` of a cell of sample_asks (_sample_asks, sorted),
+    for the finest level asked there (the last of the cell's run)."""
+    width = 2 * ring + 1
+    out = np.empty(sample_asks.shape[0] * width ** 3, dtype=np.int64)
+    n = 0
+    for i in range(sample_asks.shape[0]):
+        cell = sample_asks[i] >> _LEVEL_BITS
+        if i + 1 < sample_asks.shape[0] and sample_asks[i + 1] >> _LEVEL_BITS == cell:
+            continue  # the cell is asked finer next
+        level = sample_asks[i] & ((1 << _LEVEL_BITS) - 1)
+        cx, cy, cz = morton_coords(cell)
+        for x in range(cx - 2 * ring, cx + 1):
+            for y in range(cy - 2 * ring, cy + 1):
+                for z in range(cz - 2 * ring, cz + 1):
                     if 0 <= x < n_cells and 0 <= y < n_cells and 0 <= z < n_cells:
-                        out[n] = (morton_key(x, y, z) << _LEVEL_BITS) | np.int64(levels[i])
+                        out[n] = (morton_key(x, y, z) << _LEVEL_BITS) | level
                         n += 1
     return out[:n]
 

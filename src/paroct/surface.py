@@ -334,7 +334,8 @@ def _shells_of_one_fan_vertices(start, nxt, faces):
     a vertex are joined through their edges, so two faces are joined if and only if their
     vertices are linked through edges, and the shells are the components of the edge graph
     (nxt, by vertex).  A search over that graph reads each vertex's slots once; the union
-    of faces through edges (_shells) reads parents at random, and took 3x longer on armadillo."""
+    of faces through edges (_shells) reads parents at random, and took twice as long on
+    armadillo."""
     n = start.shape[0] - 1
     component = np.full(n, -1, dtype=np.int32)
     stack = np.empty(n, dtype=np.int32)
