@@ -563,9 +563,7 @@ MISS_REACH = 3.0
 def _measure_misses(surface: Surface, points: np.ndarray, faces: np.ndarray, size: float, report: MeshReport) -> None:
     """The surface vertices (indices) the mesh boundary (faces (B, 3) into points) misses:
     no boundary vertex within MISS_REACH x size."""
-    on_boundary = np.zeros(points.shape[0], dtype=bool)
-    on_boundary[faces.ravel()] = True
-    boundary_points = np.compress(on_boundary, points, axis=0)  # 3x faster than points[on_boundary]
+    boundary_points = np.compress(_is_used(faces, points.shape[0]), points, axis=0)  # 3x points[mask]
     report.missed_vertices = np.flatnonzero(far_from_points(surface.vertices, boundary_points, MISS_REACH * size))
 
 
@@ -1057,6 +1055,17 @@ def _compact(points, tets):
     new_id = _used_ids(tets, points.shape[0])
     _renumber(tets, new_id)
     return np.compress(new_id >= 0, points, axis=0), tets  # compress: 3x a boolean index
+
+
+@nb.njit(cache=True)
+def _is_used(ids, n_points):
+    """Mask (n_points,) of the points that rows of ids (N, K) use (numpy's scatter of True at
+    ids.ravel() took 4 ms of tray_bottom's boundary at diag/40)."""
+    used = np.zeros(n_points, dtype=np.bool_)
+    for r in range(ids.shape[0]):
+        for i in range(ids.shape[1]):
+            used[ids[r, i]] = True
+    return used
 
 
 @nb.njit(cache=True)

