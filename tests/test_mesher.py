@@ -11,7 +11,7 @@ from paroct.errors import ParoctError
 from paroct.features import FACING, thin_features
 from paroct.frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
 from paroct.lattice import leaf_tets
-from paroct.mesher import _compact, _cut_points, _used_ids, mesh
+from paroct.mesher import _compact, _cut_points, _direction_counts, _used_ids, mesh
 from paroct.octree import octant_lattice_anchors, uniform_leaves
 from paroct.quality import tet_dihedral_angles, tet_quality
 from paroct.stuffing import PRISM_TETS
@@ -450,6 +450,13 @@ def test_cut_points_are_the_frames_space_points_along_the_edges_rounded_alike(n_
     want = frame.to_space(coords[starts] + fracs[:, None] * (coords[ends] - coords[starts]))
     got = _cut_points(coords, starts, ends, fracs, frame.origin, float(frame.h), LATTICE_TO_SPACE)
     assert got.shape == (n_edges, 3) and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("n_edges", [0, 1, 1000])
+def test_direction_counts_are_numpys_bincount(n_edges):
+    dirs = np.random.default_rng(n_edges).integers(-1, EDGE_DIRECTIONS.shape[0], n_edges)
+    want = np.bincount(dirs + 1, minlength=EDGE_DIRECTIONS.shape[0] + 1)[1:]
+    assert np.array_equal(_direction_counts(dirs, EDGE_DIRECTIONS.shape[0]), want)
 
 
 @pytest.mark.parametrize("n_points, n_tets", [(0, 0), (5, 0), (1, 1), (70, 3), (1000, 40), (5000, 3000)])

@@ -724,7 +724,7 @@ def balance(keys: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarra
     # complete_from_seeds needs keys sorted, levels in any order among equal keys; the seeds are
     # a few sorted runs, which a stable (merge) sort takes in near-linear time.
     order = np.argsort(all_k, kind="stable")
-    return complete_from_seeds(all_k[order], all_l[order])
+    return complete_from_seeds(np.take(all_k, order), np.take(all_l, order))
 
 
 @nb.njit(cache=True)
