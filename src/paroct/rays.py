@@ -585,7 +585,7 @@ def add_edge_cut_fractions(crossings: RowCrossings, points: np.ndarray, starts: 
     int64 lattice points, inside (N,) their classes); other edges are left alone."""
     _edge_cuts(crossings.keys, crossings.row_box, crossings.row_starts, crossings.fracs, row_basis(crossings.direction),
                points, np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(inside, dtype=np.bool_),
-               np.ascontiguousarray(dirs, dtype=np.int64), crossings.direction, fracs, status)
+               np.ascontiguousarray(dirs, dtype=np.int8), crossings.direction, fracs, status)
 
 
 @nb.njit(cache=True, inline="always")

@@ -76,7 +76,7 @@ def collect_cut_edges(tets, inside, coords):
     gathering the others first wrote 16 bytes a tet to fresh pages, fea_part diag/40 3.5 k
     page faults).
 
-    Returns (starts (E,) vertex ids, ends (E,), directions (E,) index into EDGE_DIRECTIONS,
+    Returns (starts (E,) vertex ids, ends (E,), directions (E,) int8 index into EDGE_DIRECTIONS,
     then the lookup table (head, upper, chain): the edges whose smaller end is a are
     head[a], chain[head[a]], ... down to -1, and upper[e] is the larger end of edge e
     (_edge_of); end - start = EDGE_DIRECTIONS[direction] for the unit lattice edges, whose
@@ -163,13 +163,13 @@ def _chain_tets(tets, inside, t0, t1, head, lower, upper, chain, n):
 
 @nb.njit(cache=True, parallel=True)
 def _oriented_edges(lower, upper, coords):
-    """starts, ends, directions (E,) int64 of collect_cut_edges from _chain_cut_edges' ends:
-    each edge from the end its vector points away from when that vector has no negative
-    component, else from the end its first tet lists first."""
+    """starts, ends (E,) int64 and directions (E,) int8 of collect_cut_edges from
+    _chain_cut_edges' ends: each edge from the end its vector points away from when that
+    vector has no negative component, else from the end its first tet lists first."""
     n = lower.shape[0]
     starts = np.empty(n, dtype=np.int64)
     ends = np.empty(n, dtype=np.int64)
-    dirs = np.empty(n, dtype=np.int64)
+    dirs = np.empty(n, dtype=np.int8)  # 7 of 8 bytes a cut edge spared, read once a direction
     for i in nb.prange(n):
         a = lower[i]
         p, q = (np.int64(a), np.int64(upper[i])) if a >= 0 else (np.int64(upper[i]), np.int64(-1 - a))
