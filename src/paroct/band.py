@@ -180,11 +180,13 @@ def _fine_surface_cells(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
     if new.size:
         near = np.compress(faces_meeting_cells(buckets, new, faces.shape[0]), faces, axis=0)
         found = surface_cells(frame, snapped, near, snap_bits, level)
-        found = found[octants_in_cells(found, new, buckets.level)]
-        met = np.sort(np.concatenate([met, found]))
-        done = np.sort(np.concatenate([done, new]))
+        found = np.compress(octants_in_cells(found, new, buckets.level), found)
+        # Both sorted: the first time at a level there is nothing to merge (np.sort of the
+        # sorted cells took 3.3 ms of tray_bottom's 23 at diag/40).
+        met = np.sort(np.concatenate([met, found])) if met.size else found
+        done = np.sort(np.concatenate([done, new])) if done.size else new
         fine.done[level], fine.met[level] = done, met
-    return met[octants_in_cells(met, coarse_keys, buckets.level)]
+    return np.compress(octants_in_cells(met, coarse_keys, buckets.level), met)
 
 
 def surface_prune(frame: FatFrame, surface_keys: np.ndarray, x_crossings: RowCrossings):
