@@ -30,7 +30,7 @@ from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
                        stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
-from .topology import SurfaceTopology
+from .topology import SurfaceTopology, used_vertices
 
 #: 3r/R of Todd's fat tet, 3 / sqrt(10).
 FAT_RADIUS_RATIO = 3 / np.sqrt(10)
@@ -563,7 +563,9 @@ MISS_REACH = 3.0
 def _measure_misses(surface: Surface, points: np.ndarray, faces: np.ndarray, size: float, report: MeshReport) -> None:
     """The surface vertices (indices) the mesh boundary (faces (B, 3) into points) misses:
     no boundary vertex within MISS_REACH x size."""
-    boundary_points = np.compress(_is_used(faces, points.shape[0]), points, axis=0)  # 3x points[mask]
+    # A kernel marks them: numpy's scatter of True at faces.ravel() took 4 ms of tray_bottom's
+    # boundary at diag/40; compress is 3x points[mask].
+    boundary_points = np.compress(used_vertices(faces, points.shape[0]), points, axis=0)
     report.missed_vertices = np.flatnonzero(far_from_points(surface.vertices, boundary_points, MISS_REACH * size))
 
 
@@ -1070,27 +1072,14 @@ def _compact(points, tets):
 
 
 @nb.njit(cache=True)
-def _is_used(ids, n_points):
-    """Mask (n_points,) of the points that rows of ids (N, K) use (numpy's scatter of True at
-    ids.ravel() took 4 ms of tray_bottom's boundary at diag/40)."""
-    used = np.zeros(n_points, dtype=np.bool_)
-    for r in range(ids.shape[0]):
-        for i in range(ids.shape[1]):
-            used[ids[r, i]] = True
-    return used
-
-
-@nb.njit(cache=True)
 def _used_ids(tets, n_points):
     """New id (n_points,) int32 of each point that a tet uses, numbered in point order; -1 for
     the others."""
+    used = used_vertices(tets, n_points)
     new_id = np.full(n_points, -1, dtype=np.int32)
-    for t in range(tets.shape[0]):
-        for i in range(4):
-            new_id[tets[t, i]] = 0
     n = 0
     for v in range(n_points):
-        if new_id[v] == 0:
+        if used[v]:
             new_id[v] = n
             n += 1
     return new_id

@@ -211,7 +211,6 @@ def _row_bounds(coords, triangles, unit_bits, bounds):
     longer on armadillo, whose 86 k triangles mostly hold no row."""
     n = triangles.shape[0]
     n_chunks = min(n, TRIANGLE_CHUNKS)
-    unit = np.int64(1) << unit_bits
     for chunk in nb.prange(n_chunks):
         tri = np.empty((3, 3), dtype=np.int64)
         for f in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
@@ -224,9 +223,7 @@ def _row_bounds(coords, triangles, unit_bits, bounds):
             if box <= SMALL_BOX_ROWS:
                 bounds[f] = box
                 continue
-            for k in range(3):
-                for i in range(3):
-                    tri[k, i] = coords[triangles[f, k], i]
+            _, _, _, _, unit = _load_triangle(coords, triangles, f, tri, unit_bits)
             rows = 0
             for r2 in range(r2a, r2b + 1):
                 first, last = _column_rows(tri, r2, unit, r3a, r3b)

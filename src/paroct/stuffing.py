@@ -19,7 +19,6 @@ positions of the cut points (Labelle & Shewchuk, Theorem 1).
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numba as nb

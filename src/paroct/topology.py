@@ -264,6 +264,16 @@ def union(parent, a, b):
 
 
 @nb.njit(cache=True)
+def used_vertices(ids, n_vertices):
+    """Mask (n_vertices,) of the vertices that rows of ids (N, K) (faces, tets) use."""
+    used = np.zeros(n_vertices, dtype=np.bool_)
+    for r in range(ids.shape[0]):
+        for k in range(ids.shape[1]):
+            used[ids[r, k]] = True
+    return used
+
+
+@nb.njit(cache=True)
 def _components(faces, n_vertices):
     parent = np.arange(n_vertices)
     for f in range(faces.shape[0]):
@@ -271,10 +281,7 @@ def _components(faces, n_vertices):
             a = faces[f, 0]
             b = faces[f, j]
             union(parent, a, b)
-    used = np.zeros(n_vertices, dtype=np.bool_)
-    for f in range(faces.shape[0]):
-        for j in range(3):
-            used[faces[f, j]] = True
+    used = used_vertices(faces, n_vertices)
     count = 0
     for v in range(n_vertices):
         if used[v] and parent[v] == v:
