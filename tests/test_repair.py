@@ -4,23 +4,27 @@ against one computed from scratch."""
 import numpy as np
 import pytest
 
+from paroct import repair
 from paroct.lattice import leaf_tets
-from paroct.repair import remove_pinches, stuffed_boundary
+from paroct.repair import local_repair, remove_pinches, stuffed_boundary
 from paroct.topology import boundary_faces, match_faces, nonmanifold_vertices, surface_topology
 
 from . import naive
 
 
-def _pinched_block(seed: int, n: int = 10, keep: float = 0.55):
+def _pinched_block(seed: int, n: int = 10, keep: float = 0.55, within: int | None = None):
     """Kuhn tets of an n^3 block with random tets of its outer cell layers dropped (pinches
-    appear where the remaining tets touch at a vertex or edge), and the core mask: vertices on
-    no boundary face, so a face of three core vertices is interior."""
+    appear where the remaining tets touch at a vertex or edge), only those within ``within``
+    cells of the block's first corner if given, and the core mask: vertices on no boundary
+    face, so a face of three core vertices is interior."""
     rng = np.random.default_rng(seed)
     g = np.arange(n)
     anchors = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
     coords, tets = leaf_tets(anchors, np.ones(len(anchors), dtype=np.int64))
     centre = coords[tets].mean(axis=1)
     outer = (np.minimum(centre, n - centre) < 2).any(axis=1)
+    if within is not None:
+        outer &= (centre < within).all(axis=1)
     tets = np.ascontiguousarray(tets[~outer | (rng.random(len(tets)) < keep)])
     core = np.ones(len(coords), dtype=bool)
     core[boundary_faces(tets, match_faces(tets)[0]).ravel()] = False
@@ -43,9 +47,6 @@ def test_local_repair_matches_a_dictionary_twin(seed):
     bad = np.nonzero(nonmanifold_vertices(faces, len(core)))[0]
     assert bad.size  # every seed has pinches to repair
     whole_alive = naive.repair_pinches(tets, bad)
-    band = np.zeros(len(core), dtype=bool)
-    band[tets[~core[tets].all(axis=1)].ravel()] = True
-    assert not band[tets].any(axis=1).all()  # the local repair works on part of the mesh
     out, removed, out_faces, topology = remove_pinches(tets, core.copy())
     assert removed == int((~whole_alive).sum()) > 0
     assert np.array_equal(out, tets[whole_alive])
@@ -53,6 +54,36 @@ def test_local_repair_matches_a_dictionary_twin(seed):
     assert _face_set(out_faces) == _face_set(boundary_faces(out, match_faces(out)[0]))
     assert not nonmanifold_vertices(out_faces, len(core)).any() and not naive.nonmanifold_vertices(out_faces, len(core)).any()
     assert topology == surface_topology(out_faces, len(core)) and topology.manifold
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_local_repair_gives_the_whole_repair_from_any_ring(seed, monkeypatch):
+    """The repair on the stars within 0, 1 or 2 rings of the bad vertices, falling back to
+    the whole mesh where the worklist leaves them, removes the tets the dictionary twin does
+    on the whole mesh.  At ring 0 every removal leaves the stars (the fallback runs); at
+    ring 2 the first try, on part of the mesh, holds the whole repair (the pinches lie in one
+    corner of the block)."""
+    tets, core = _pinched_block(seed, n=14, within=5)
+    faces = boundary_faces(tets, match_faces(tets)[0])
+    bad = np.nonzero(nonmanifold_vertices(faces, len(core)))[0]
+    whole_alive = naive.repair_pinches(tets, bad)
+    assert not whole_alive.all()
+    tries = []
+
+    def spy(sub, *args):
+        alive, ok = repair_kernel(sub, *args)
+        tries.append((len(sub), ok))
+        return alive, ok
+
+    repair_kernel = repair._repair
+    monkeypatch.setattr(repair, "_repair", spy)
+    for rings in range(3):
+        tries.clear()
+        assert np.array_equal(local_repair(tets, bad, len(core), rings), whole_alive)
+        if rings == 0:
+            assert [ok for _, ok in tries] == [False, True] and tries[1][0] == len(tets)
+        if rings == 2:
+            assert len(tries) == 1 and tries[0][1] and tries[0][0] < len(tets) // 2
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -99,11 +99,14 @@ def match_faces(tets):
 
 @nb.njit(cache=True, parallel=True)
 def touching(tets, marked):
-    """Mask (M,) of the tets with a marked vertex (marked[tets].any(axis=1) without its (M, 4)
-    temporary)."""
+    """Mask (M,) of the rows of tets (M, K) (tets, faces) with a marked vertex
+    (marked[tets].any(axis=1) without its (M, K) temporary)."""
     out = np.empty(tets.shape[0], dtype=np.bool_)
     for t in nb.prange(tets.shape[0]):
-        out[t] = marked[tets[t, 0]] or marked[tets[t, 1]] or marked[tets[t, 2]] or marked[tets[t, 3]]
+        hit = False
+        for k in range(tets.shape[1]):
+            hit |= marked[tets[t, k]]
+        out[t] = hit
     return out
 
 
