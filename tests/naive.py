@@ -277,6 +277,19 @@ def surface_edges(faces: np.ndarray) -> tuple[int, int, int]:
     return len(seen), len({int(v) for v in np.ravel(faces)}), bad
 
 
+def face_components(faces: np.ndarray) -> int:
+    """Connected components of triangles joined through shared vertices, by merging vertex
+    sets."""
+    group: dict = {}
+    for f in np.asarray(faces).tolist():
+        merged = {v for v in f}
+        for v in f:
+            merged |= group.get(v, set())
+        for v in merged:
+            group[v] = merged
+    return len({id(g) for g in group.values()})
+
+
 def nonmanifold_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Mask (V,) of the vertices whose link (faces (v, p, q) as edges p -> q) is not one
     cycle through distinct vertices, by dictionaries (see topology.nonmanifold_vertices)."""

@@ -105,3 +105,16 @@ def test_stuffed_boundary_and_its_fans_match_dictionary_twins(seed):
     topology = surface_topology(faces, len(core))
     assert (topology.n_edges, topology.n_vertices, topology.bad_edges) == naive.surface_edges(faces)
     assert topology.bad_vertices == naive.nonmanifold_vertices(faces, len(core)).sum()
+    assert topology.components == naive.face_components(faces)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_components_of_random_triangles_match_a_set_twin(seed):
+    """Components from a search over the links against merged vertex sets, on triangles of a
+    few random vertices (isolated vertices, repeated and degenerate-free soups, one face)."""
+    rng = np.random.default_rng(seed)
+    n_vertices = int(rng.integers(3, 60))
+    n_faces = 1 if seed == 0 else int(rng.integers(1, 40))
+    faces = np.array([rng.choice(n_vertices, 3, replace=False) for _ in range(n_faces)])
+    topology = surface_topology(faces, n_vertices + 5)
+    assert topology.components == naive.face_components(faces) >= 1

@@ -15,8 +15,8 @@ import numba as nb
 import numpy as np
 
 from .topology import TET_FACES as _FACES
-from .topology import (SurfaceTopology, _sort3, match_faces, nonmanifold_of_fans, surface_topology, touching,
-                       used_vertices, vertex_fans)
+from .topology import (SurfaceTopology, _sort3, local_vertex_ids, match_faces, nonmanifold_of_fans, surface_topology,
+                       touching, used_vertices, vertex_fans)
 
 
 @nb.njit(cache=True)
@@ -276,8 +276,25 @@ def stuffed_boundary(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
     lattice face through three of them is kept by the stencils on both sides), so only
     faces without one can be boundary faces (surface_faces), and they are matched among
     themselves (a sixth of matching every face of the tets with three vertices not core)."""
-    faces = surface_faces(tets, core)
-    return np.compress(unmatched_faces(faces, core.shape[0]), faces, axis=0)
+    faces, vertex_of = _local_boundary(tets, core)
+    return _global_ids(faces, vertex_of)
+
+
+def _local_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """stuffed_boundary's faces (F, 3) in local vertex ids, and vertex_of (B,): the mesh's id
+    of each (local_vertex_ids of the faces without a core vertex)."""
+    candidates, vertex_of = local_vertex_ids(surface_faces(tets, core))
+    return np.compress(unmatched_faces(candidates, vertex_of.shape[0]), candidates, axis=0), vertex_of
+
+
+@nb.njit(cache=True, parallel=True)
+def _global_ids(faces, vertex_of):
+    """faces (F, 3) in the mesh's vertex ids: vertex_of[faces], of faces' type."""
+    out = np.empty_like(faces)
+    for f in nb.prange(faces.shape[0]):
+        for k in range(3):
+            out[f, k] = vertex_of[faces[f, k]]
+    return out
 
 
 def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, SurfaceTopology]:
@@ -289,11 +306,15 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, int,
     core: see stuffed_boundary; vertices of removed tets leave it.
     """
     tets = np.ascontiguousarray(tets)
-    faces = stuffed_boundary(tets, core)
-    fans = vertex_fans(faces, core.shape[0])
-    bad = np.flatnonzero(nonmanifold_of_fans(fans))
+    # The boundary's topology is found over its own vertices, numbered 0..B-1.
+    faces, vertex_of = _local_boundary(tets, core)
+    local_fans = vertex_fans(faces, vertex_of.shape[0])
+    bad = np.flatnonzero(nonmanifold_of_fans(local_fans))
     if bad.size == 0:
-        return tets, 0, faces, surface_topology(faces, core.shape[0], fans=fans)
+        return tets, 0, _global_ids(faces, vertex_of), surface_topology(faces, vertex_of.shape[0], fans=local_fans)
+    faces, bad = _global_ids(faces, vertex_of), np.sort(vertex_of[bad])  # in ascending order, as the repair was given them
+    fans = np.zeros(core.shape[0], dtype=local_fans.dtype)
+    fans[vertex_of] = local_fans
     alive = local_repair(tets, bad, core.shape[0])
     removed = np.nonzero(~alive)[0]
     lost = np.zeros(core.shape[0], dtype=bool)

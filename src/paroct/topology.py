@@ -277,6 +277,28 @@ def used_vertices(ids, n_vertices):
 
 
 @nb.njit(cache=True)
+def local_vertex_ids(ids):
+    """The rows of ids (N, K) with their vertices numbered 0..B-1 in order of first use, and
+    vertex_of (B,) int64, the original id of each: (local (N, K) of ids' type, vertex_of).
+    Kernels sized by the vertex count then size by B: a stuffed mesh's boundary uses a
+    sixth of its points (round_rod at diag/80: 418 k of 2.4 M), and its counting sorts and
+    union-find over 2.4 M slots took twice as long."""
+    new_id = np.full(ids.max() + 1 if ids.size else 0, -1, dtype=np.int64)
+    local = np.empty_like(ids)
+    vertex_of = np.empty(ids.size, dtype=np.int64)
+    b = 0
+    for r in range(ids.shape[0]):
+        for k in range(ids.shape[1]):
+            v = ids[r, k]
+            if new_id[v] < 0:
+                new_id[v] = b
+                vertex_of[b] = v
+                b += 1
+            local[r, k] = new_id[v]
+    return local, vertex_of[:b]
+
+
+@nb.njit(cache=True)
 def _components(faces, n_vertices):
     parent = np.arange(n_vertices)
     for f in range(faces.shape[0]):
