@@ -506,10 +506,14 @@ def _stencil_offsets(tets, signs):
     offsets[0] = 0
     n_chunks = min(n, 256)
     for chunk in nb.prange(n_chunks):
-        scratch = np.empty((3, 4), dtype=np.int64)
         for t in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            n_p, n_z, n_m = _sign_pattern(tets, t, signs, scratch[0], scratch[1], scratch[2])
-            offsets[t + 1] = _stencil_size(n_p, n_z, n_m)
+            n_p = 0
+            n_m = 0
+            for i in range(4):  # counts only, without branches (_sign_pattern lists the vertices too)
+                s = signs[tets[t, i]]
+                n_p += s > 0
+                n_m += s < 0
+            offsets[t + 1] = _stencil_size(n_p, 4 - n_p - n_m, n_m)
     for t in range(n):
         offsets[t + 1] += offsets[t]
     return offsets
