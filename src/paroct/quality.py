@@ -284,7 +284,7 @@ def _summarize(points, tets, core, fat_ratio, partial, fat_count):
                 if abs(ratio - fat_ratio) < 1e-9:
                     fat += 1
                 t = start + j
-                if core[tets[t, 0]] and core[tets[t, 1]] and core[tets[t, 2]] and core[tets[t, 3]]:
+                if core[tets[t, 0]] & core[tets[t, 1]] & core[tets[t, 2]] & core[tets[t, 3]]:  # one branch, not four
                     icmax = max(icmax, c_hi)
                     icmin = min(icmin, c_lo)
         partial[chunk, 0] = _degrees(cmax)
