@@ -16,6 +16,7 @@ from paroct.octree import (
     tree_is_balanced,
     tree_is_complete,
     tree_is_linear,
+    unique_level_keys,
 )
 
 ML = octant.MAX_LEVEL
@@ -219,3 +220,18 @@ def test_refine_to_level_lists_every_descendant_in_morton_order(depth):
                  for i, j, k in itertools.product(range(1 << depth), repeat=3)]
         expected.extend(sorted(below))
     assert np.array_equal(refine_to_level(keys, level, level + depth), expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_unique_level_keys_by_bitmap_or_sort_are_the_set_of_keys(seed):
+    """Distinct keys of one level, ascending, against a Python set: levels whose cells a
+    bitmap holds (2, 3, 7) and one too fine for it (12, sorted), with repeats, shuffled, and
+    no keys at all."""
+    rng = np.random.default_rng(seed)
+    for level, n in [(2, 1), (3, 0), (3, 200), (7, 5000), (12, 3000)]:
+        coords = rng.integers(0, 1 << level, size=(n, 3))
+        keys = octant.morton_keys(coords << (ML - level))
+        keys = np.concatenate([keys, keys[: n // 2]])
+        rng.shuffle(keys)
+        got = unique_level_keys(keys, level)
+        assert got.dtype == np.int64 and got.tolist() == sorted(set(keys.tolist()))

@@ -23,7 +23,8 @@ from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_l
                    no_band_levels, surface_prune)
 from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, ancestor_keys, morton_key, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
-from .octree import FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells
+from .octree import (FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells,
+                     unique_level_keys)
 from .quality import OUTSIDE, outlier_flags, summarize
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
@@ -868,7 +869,7 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings, report)
     targets = warp_targets(cuts, cut_cells.coords, frame.h)
     around = _cells_around(cut_cells.coords, targets >= 0, MAX_LEVEL - finest)
-    band = sorted_unique(np.concatenate([cut_keys, around]))
+    band = unique_level_keys(np.concatenate([cut_keys, around]), finest)
 
     seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
                        prune=surface_prune(frame, met, x_crossings))
