@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .frame import FatFrame
 from .octant import (
@@ -451,13 +452,10 @@ def _set_bits(bitmap):
     n = 0
     for w in range(bitmap.shape[0]):
         word = bitmap[w]
-        for i in range(64):
-            if word == 0:
-                break
-            if word & np.uint64(1):
-                out[n] = 64 * w + i
-                n += 1
-            word >>= np.uint64(1)
+        while word:  # a set bit at a time, its index by the CPU's trailing-zero count
+            out[n] = 64 * w + trailing_zeros(word)
+            n += 1
+            word &= word - np.uint64(1)
     return out
 
 
