@@ -665,6 +665,18 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts,
 _BOX_SLACK = 1e-6
 
 
+@nb.njit(cache=True, parallel=True)
+def _lattice_triangles(snapped, faces, unit):
+    """The triangles (F, 3, 3) float64 in lattice coordinates: snapped[faces] / unit, without
+    numpy's (F, 3, 3) int64 gather first (2.3 ms of fea_part's 21 at diag/40)."""
+    out = np.empty((faces.shape[0], 3, 3))
+    for f in nb.prange(faces.shape[0]):
+        for k in range(3):
+            for i in range(3):
+                out[f, k, i] = snapped[faces[f, k], i] / unit
+    return out
+
+
 def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
                           coords: np.ndarray, starts: np.ndarray, ends: np.ndarray,
                           start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -679,7 +691,8 @@ def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.nda
     """
     out = np.empty(starts.shape[0], dtype=np.float64)
     status = np.empty(starts.shape[0], dtype=np.int8)
-    triangles = snapped[faces] / float(1 << snap_bits(frame))  # (F, 3, 3) lattice coordinates
+    triangles = _lattice_triangles(np.ascontiguousarray(snapped, dtype=np.int64), np.ascontiguousarray(faces),
+                                   float(1 << snap_bits(frame)))
     _segment_cuts(buckets.keys, buckets.offsets, buckets.faces, triangles, np.ascontiguousarray(coords, dtype=np.int64),
                   np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(ends, dtype=np.int64),
                   np.ascontiguousarray(start_inside, dtype=np.bool_), frame.levels - buckets.level,
