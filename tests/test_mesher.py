@@ -8,10 +8,10 @@ import pytest
 
 from paroct import rays
 from paroct.errors import ParoctError
-from paroct.features import FACING, thin_features
+from paroct.features import FACING, ThinFeatures, thin_features
 from paroct.frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
 from paroct.lattice import leaf_tets
-from paroct.mesher import _compact, _cut_points, _direction_counts, _used_ids, mesh
+from paroct.mesher import _compact, _cut_points, _direction_counts, _next_ask, _thin_asks, _used_ids, mesh
 from paroct.octree import octant_lattice_anchors, uniform_leaves
 from paroct.quality import tet_dihedral_angles, tet_quality
 from paroct.stuffing import PRISM_TETS
@@ -174,6 +174,29 @@ def test_thin_walls_refine_the_boundary_until_two_layers_span_them():
     # Only the fin's band is fine: the block keeps the requested size along its boundary.
     everywhere = mesh(surface, size=0.0125, max_size=0.8, thin_features=False)
     assert rep.n_tets < 0.5 * everywhere.report.n_tets
+
+
+@pytest.mark.parametrize("thickness, steps", [
+    # Two layers across 1/64 of the coarse size need 7 levels: the cap (3) deepens alone
+    # while it holds them short, then every sample with the cap.
+    ([1 / 64, 0.5], [(4, 0), (5, 0), (6, 0), (6, 1), (6, 2), (6, 3), (6, 4), None]),
+    # Samples within the cap: the shallow one deepens first, then both with the cap.
+    ([0.3, 1.0], [(3, 1), (3, 2), (4, 3), (5, 4), (6, 5), None]),
+])
+def test_losing_rounds_deepen_held_samples_first_then_all(thickness, steps):
+    coarse = fat_frame(np.zeros(3), np.ones(3), 1.0)
+    k = len(thickness)
+    walls = ThinFeatures(np.array(thickness), np.full((k, 3), 0.5), np.ones(k, dtype=bool), np.full(k, -1.0))
+    max_depth, cap, extra = 6, 3, 0
+    for want in steps:
+        depth = _thin_asks(coarse, walls, cap, extra)[1]
+        got = _next_ask(coarse, walls, depth, cap, extra, max_depth)
+        assert got == want
+        if got is None:
+            assert (_thin_asks(coarse, walls, max_depth, extra)[1] == max_depth).all()
+            break
+        assert got[0] <= max_depth and (got[0], got[1]) != (cap, extra)
+        cap, extra = got
 
 
 def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):
