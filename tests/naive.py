@@ -322,6 +322,20 @@ def stuffed_boundary(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
     return np.array(out, dtype=np.int64).reshape(-1, 3)
 
 
+def star_partners(tets: np.ndarray, star: list[int], v: int) -> dict[tuple[int, int], int]:
+    """{(i, k): j} for tet star[i] and each vertex k of it other than v: the smallest index
+    j != i of a tet of star holding the face through v opposite k (the other two vertices
+    and v), -1 if none; every pair of tets compared vertex by vertex."""
+    out = {}
+    for i, t in enumerate(star):
+        for k in range(4):
+            if tets[t, k] == v:
+                continue
+            face = set(tets[t].tolist()) - {int(tets[t, k])}
+            out[(i, k)] = next((j for j, o in enumerate(star) if j != i and face <= set(tets[o].tolist())), -1)
+    return out
+
+
 def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
     """Alive mask (M,) of paroct.repair's worklist repair, by dictionaries.
 

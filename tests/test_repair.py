@@ -56,6 +56,22 @@ def test_local_repair_matches_a_dictionary_twin(seed):
     assert topology == surface_topology(out_faces, len(core)) and topology.manifold
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_star_partners_match_a_pairwise_twin(seed):
+    """Face partners in the stars of a pinched block's vertices, and of random parts of them
+    (tets dropped, order shuffled), against every pair compared."""
+    tets, _ = _pinched_block(seed, n=6)
+    rng = np.random.default_rng(seed)
+    for v in rng.choice(np.unique(tets), 60, replace=False):
+        star = np.flatnonzero((tets == v).any(axis=1))
+        if seed % 2:
+            star = rng.permutation(star)[: max(1, int(rng.integers(1, star.size + 1)))]
+        partner = np.full(4 * star.size, -2, dtype=np.int64)
+        repair._star_partners(tets, star, star.size, v, partner)
+        want = naive.star_partners(tets, star.tolist(), int(v))
+        assert {key: int(partner[4 * key[0] + key[1]]) for key in want} == want
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_local_repair_gives_the_whole_repair_from_any_ring(seed, monkeypatch):
     """The repair on the stars within 0, 1 or 2 rings of the bad vertices, falling back to

@@ -39,25 +39,54 @@ def _vertex_tets(tets, n_vertices):
 
 
 @nb.njit(cache=True)
-def _star_partner(tets, star, n, i, v, off):
-    """Index j != i in star[:n] of the tet sharing with tet star[i] its face through v
-    (the face opposite its vertex off), or -1: a face through v has both its tets in v's star."""
-    t = star[i]
-    for j in range(n):
-        if j == i:
-            continue
-        o = star[j]
-        shared = 0
-        for a in range(4):
-            w = tets[t, a]
-            if w == v or w == off:
+def _star_partners(tets, star, n, v, partner):
+    """partner[4 i + k] = the index j != i in star[:n] of the tet sharing with tet star[i] its
+    face through v opposite its vertex k (the smallest such j), -1 if none, for the k whose
+    vertex is not v: a face through v has both its tets in v's star.
+
+    The faces are keyed by their two vertices other than v and sorted (insertion sort: 3 n
+    keys, n about 24), so equal keys are neighbours; testing every pair of the star's tets
+    vertex by vertex cost 3 n^2 x 16 comparisons, 17 us a vertex (a plate whose 0.01 slots
+    the lattice bridged at size / 8 had 83 k pinched vertices: 1.4 -> 0.66 s a repair)."""
+    keys = np.empty(3 * n, dtype=np.int64)
+    slots = np.empty(3 * n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        t = star[i]
+        for k in range(4):
+            if tets[t, k] == v:
                 continue
-            for b in range(4):
-                if tets[o, b] == w:
-                    shared += 1
-        if shared == 2:
-            return j
-    return -1
+            a = -1
+            b = -1
+            for c in range(4):
+                w = np.int64(tets[t, c])
+                if c != k and w != v:
+                    if a < 0:
+                        a = w
+                    else:
+                        b = w
+            key = (min(a, b) << 32) | max(a, b)
+            j = m
+            while j > 0 and keys[j - 1] > key:  # stable: equal keys keep slot order
+                keys[j] = keys[j - 1]
+                slots[j] = slots[j - 1]
+                j -= 1
+            keys[j] = key
+            slots[j] = 4 * i + k
+            m += 1
+    r = 0
+    while r < m:
+        e = r + 1
+        while e < m and keys[e] == keys[r]:
+            e += 1
+        # slots[r:e] ascend, and a tet holds no key twice: the smallest other tet is the
+        # first of the run, or the second for the first itself.
+        for q in range(r, e):
+            if e - r == 1:
+                partner[slots[q]] = -1
+            else:
+                partner[slots[q]] = slots[r + 1 if q == r else r] // 4
+        r = e
 
 
 @nb.njit(cache=True)
@@ -80,12 +109,14 @@ def _repair_star(v, tets, alive, offsets, ids, remove_out):
     dst = np.empty(3 * n, dtype=np.int64)
     m = 0
     label = np.arange(n)
+    partner = np.empty(4 * n, dtype=np.int64)
+    _star_partners(tets, star, n, v, partner)
     for i in range(n):
         t = star[i]
         for k in range(4):
             if tets[t, k] == v:
                 continue
-            j = _star_partner(tets, star, n, i, v, tets[t, k])
+            j = partner[4 * i + k]
             if j >= 0:
                 if label[j] != label[i]:
                     old = max(label[i], label[j])
