@@ -7,7 +7,7 @@ import pytest
 from paroct import repair
 from paroct.lattice import leaf_tets
 from paroct.repair import local_repair, remove_pinches, stuffed_boundary
-from paroct.topology import boundary_faces, match_faces, nonmanifold_vertices, surface_topology
+from paroct.topology import boundary_faces, keep_rows, match_faces, nonmanifold_vertices, surface_topology
 
 from . import naive
 
@@ -47,13 +47,23 @@ def test_local_repair_matches_a_dictionary_twin(seed):
     bad = np.nonzero(nonmanifold_vertices(faces, len(core)))[0]
     assert bad.size  # every seed has pinches to repair
     whole_alive = naive.repair_pinches(tets, bad)
-    out, removed, out_faces, topology = remove_pinches(tets, core.copy())
+    out, removed, out_faces, topology = remove_pinches(tets.copy(), core.copy())
     assert removed == int((~whole_alive).sum()) > 0
     assert np.array_equal(out, tets[whole_alive])
     # The updated boundary is the result's boundary, closed and manifold.
     assert _face_set(out_faces) == _face_set(boundary_faces(out, match_faces(out)[0]))
     assert not nonmanifold_vertices(out_faces, len(core)).any() and not naive.nonmanifold_vertices(out_faces, len(core)).any()
     assert topology == surface_topology(out_faces, len(core)) and topology.manifold
+
+
+@pytest.mark.parametrize("n, dropped", [(0, 0.0), (1, 1.0), (50, 0.0), (50, 1.0), (1000, 0.01), (1000, 0.5)])
+def test_keep_rows_is_compress_in_place(n, dropped):
+    rng = np.random.default_rng(n)
+    rows = rng.integers(0, 99, (n, 4)).astype(np.int32)
+    keep = rng.random(n) >= dropped
+    moved = rows.copy()
+    count = keep_rows(moved, keep)
+    assert count == keep.sum() and np.array_equal(moved[:count], np.compress(keep, rows, axis=0))
 
 
 @pytest.mark.parametrize("seed", range(4))

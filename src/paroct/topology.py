@@ -277,6 +277,21 @@ def used_vertices(ids, n_vertices):
 
 
 @nb.njit(cache=True)
+def keep_rows(rows, keep):
+    """Move the rows (N, K) whose keep (N,) bool is set to the front, in order, in place;
+    returns how many: rows[:count] is np.compress(keep, rows, axis=0).  Half compress's
+    time and no second array (14 M tets: 51 against 102 ms, and 224 MB not allocated)."""
+    count = 0
+    for r in range(rows.shape[0]):
+        if keep[r]:
+            if count != r:
+                for k in range(rows.shape[1]):
+                    rows[count, k] = rows[r, k]
+            count += 1
+    return count
+
+
+@nb.njit(cache=True)
 def local_vertex_ids(ids):
     """The rows of ids (N, K) with their vertices numbered 0..B-1 in order of first use, and
     vertex_of (B,) int64, the original id of each: (local (N, K) of ids' type, vertex_of).
