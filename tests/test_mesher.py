@@ -199,6 +199,38 @@ def test_losing_rounds_deepen_held_samples_first_then_all(thickness, steps):
         cap, extra = got
 
 
+@pytest.mark.parametrize("halving_lost", [False, True])
+def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_lost):
+    """When the rounds near thin places fail, the whole band shrinks by halves (skipping
+    size / 2 if the halving tried it) until a pass keeps the solid, even with a wall far
+    thinner than the floor; each pass here 'loses' until size / 4."""
+    from paroct import mesher
+
+    real, sizes, h = mesher._mesh_at, [], 0.1
+    thin = ThinFeatures(np.array([h / 100]), np.full((1, 3), 0.5), np.ones(1, dtype=bool), np.full(1, -1.0))
+
+    def pass_losing_above_quarter(surface, field, report, progress):
+        result, _, _, _ = real(surface, field, report, progress)
+        sizes.append(field.size)
+        return result, ("the mesh lost a wall" if field.size > h / 3 else ""), "advice", thin
+
+    def rounds(*args):
+        return None, "the rounds failed", False
+
+    def halving_first(*args):
+        return None, "estimated smaller", True
+
+    monkeypatch.setattr(mesher, "_mesh_at", pass_losing_above_quarter)
+    monkeypatch.setattr(mesher, "_thin_locally", halving_first if halving_lost else rounds)
+    if halving_lost:  # the second call, after the halving lost, is the rounds'
+        calls = iter([halving_first, rounds])
+        monkeypatch.setattr(mesher, "_thin_locally", lambda *a: next(calls)(*a))
+    result = mesh(manifold3d.Manifold.cube([1, 1, 1]), size=h)
+    assert sizes == pytest.approx([h, h / 2, h / 4])
+    assert result.report.size == pytest.approx(h / 4) and not result.report.warnings
+    assert result.report.notes[-1].startswith(f"boundary size {h if halving_lost else h / 2:.4g} -> {h / 4:.4g}")
+
+
 def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):
     """_outside_bound measures only tets with a vertex that is not core.  The tets it skips
     (stuffing's copies of lattice tets) are never outside the bound nor needles, and on the
