@@ -214,21 +214,44 @@ def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_
         sizes.append(field.size)
         return result, ("the mesh lost a wall" if field.size > h / 3 else ""), "advice", thin
 
-    def rounds(*args):
+    def rounds(*args, **kwargs):
         return None, "the rounds failed", False
 
-    def halving_first(*args):
+    def halving_first(*args, **kwargs):
         return None, "estimated smaller", True
 
     monkeypatch.setattr(mesher, "_mesh_at", pass_losing_above_quarter)
     monkeypatch.setattr(mesher, "_thin_locally", halving_first if halving_lost else rounds)
     if halving_lost:  # the second call, after the halving lost, is the rounds'
         calls = iter([halving_first, rounds])
-        monkeypatch.setattr(mesher, "_thin_locally", lambda *a: next(calls)(*a))
+        monkeypatch.setattr(mesher, "_thin_locally", lambda *a, **k: next(calls)(*a, **k))
     result = mesh(manifold3d.Manifold.cube([1, 1, 1]), size=h)
     assert sizes == pytest.approx([h, h / 2, h / 4])
     assert result.report.size == pytest.approx(h / 4) and not result.report.warnings
     assert result.report.notes[-1].startswith(f"boundary size {h if halving_lost else h / 2:.4g} -> {h / 4:.4g}")
+
+
+@pytest.mark.parametrize("whole_tets, steps", [(10**15, 2), (0, 1)])
+def test_steps_near_thin_places_stop_above_the_whole_band(monkeypatch, whole_tets, steps):
+    """Every step near a 0.001 gap 'loses': with the whole band at the fallback's floor
+    estimated above them, the steps go on to min_size (size / 8, then / 16); estimated below,
+    only the first is made."""
+    from paroct import mesher
+
+    made = []
+
+    def step(surface, field, framed, wanted, report, progress, window):
+        made.append(wanted)
+        return "a mesh", None
+
+    monkeypatch.setattr(mesher, "_mesh_locally", step)
+    monkeypatch.setattr(mesher, "_losses", lambda report, surface: "the mesh lost the gap")
+    surface = load_surface(manifold3d.Manifold.cube([1, 1, 1]))
+    gap = ThinFeatures(np.array([0.001]), np.full((1, 3), 0.5), np.zeros(1, dtype=bool), np.full(1, -1.0))
+    result, why, halve = mesher._thin_locally(surface, mesher.size_field(0.1, None, (), None), gap, 0.1 / 16, 2**40,
+                                              "lost", None, None, {}, whole=(0.0125, whole_tets))
+    assert result is None and not halve and len(made) == steps
+    assert why.startswith("min_size" if steps == 2 else "a step near thin places at 0.00625 is estimated at")
 
 
 def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):

@@ -198,7 +198,8 @@ def mesh(
     estimated at fewer tets than refining near the thin places, at size / 2; else, or if that
     still loses, with the boundary refined only near the walls and gaps thinner than 2 * size
     and the missed parts, to two element layers across each (first at most size / 8, then
-    deeper while it still loses, down to min_size, default size / 16), every tet measured,
+    deeper while it still loses, down to min_size, default size / 16, unless a step is
+    estimated above the whole boundary at size / 8), every tet measured,
     other warps tried near any outside [10.7, 164.8] degrees (and near needles, 3r/R below
     NEEDLE_RATIO) and the band refined where they do not mend an angle; if that does not keep
     the solid, the whole boundary size shrinks by halves instead, as far as max_memory allows
@@ -233,8 +234,9 @@ def mesh(
             if (report.missed_vertices.size == 0 and abs(report.volume_error) < VOLUME_LOSS_WARNING * HALVING_GAIN
                     and h / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, h / 2, budget)):
                 halved = estimate_tets(surface, _at_boundary_size(field, h / 2))
+            whole = (whole_floor, estimate_tets(surface, _at_boundary_size(field, whole_floor)))
             local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress,
-                                              stage_seconds)
+                                              stage_seconds, whole=whole)
             tried = []
             if halve:
                 half = _pass_report(surface, field, h / 2, stage_seconds)
@@ -246,7 +248,8 @@ def mesh(
                 halved_lost = True
                 tried = [f"boundary refined to {h / 2:.4g} everywhere ({why}): at {h / 2:.4g} {still}; "
                          f"refining near thin places from {h:.4g} instead"]
-                local, why, _ = _thin_locally(surface, field, walls, floor, budget, lost, None, progress, stage_seconds)
+                local, why, _ = _thin_locally(surface, field, walls, floor, budget, lost, None, progress, stage_seconds,
+                                              whole=whole)
             if local is not None:
                 first, *rest = local.report.notes
                 local.report.notes = [*notes, first, *tried, *rest]
@@ -300,8 +303,8 @@ def _local_depth(size: float, floor: float) -> int:
 
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
-                  halved: int | None, progress: Callable[[str], None] | None,
-                  stage_seconds: dict) -> tuple[MeshResult | None, str, bool]:
+                  halved: int | None, progress: Callable[[str], None] | None, stage_seconds: dict, *,
+                  whole: tuple[float, int] | None = None) -> tuple[MeshResult | None, str, bool]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
     one level more while the mesh still loses topology or volume.  Returns (result, '', False);
@@ -309,7 +312,10 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     memory budget reached; the rounds stopped finding fewer tets outside the bound), and the
     caller refines the whole band; or (None, why, True) when no round was made because halved,
     estimate_tets of the whole band at size / 2 (None: not to be tried), is below the first
-    round's _local_tets, and the caller tries the whole band at size / 2 (HALVING_GAIN)."""
+    round's _local_tets, and the caller tries the whole band at size / 2 (HALVING_GAIN).
+    whole: (size, estimate_tets) of the whole band at the finest size the caller's fallback
+    goes to; a deeper step after the first is not made once its _local_tets exceeds that
+    (LOCAL_OVER_WHOLE)."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
     if max_depth < 1:  # min_size leaves no finer level to refine to
@@ -317,14 +323,14 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     notes = [f"at boundary size {field.size:.4g} {lost}"]
     framed, tried = None, None
     cap, extra = min(max_depth, WHOLE_BAND_DEPTH), 0
-    for _ in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
+    for step in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
         frame, depth, wanted = _local_ask(coarse, walls, cap, extra)
         if depth.size == 0:
             return None, "", False
         if frame.levels > MAX_FRAME_LEVELS:
             return None, f"a frame of {frame.levels} levels is too deep", False
         local = _local_tets(surface, field, wanted)
-        if extra == 0 and halved is not None and halved < local:
+        if step == 0 and halved is not None and halved < local:
             return None, (f"the whole band at size / 2 is estimated at {halved} tets, fewer than the {local} "
                           "of a round near them"), True
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
@@ -335,6 +341,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                 break
             cap, extra = deeper
             continue
+        if step > 0 and whole is not None and local > whole[1]:
+            return None, LOCAL_OVER_WHOLE.format(size=frame.h, tets=local, whole_size=whole[0], whole_tets=whole[1]), False
         tried = wanted
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
@@ -427,6 +435,12 @@ def _next_ask(coarse: FatFrame, walls: ThinFeatures, depth: np.ndarray, cap: int
 HALVING_GAIN = 4
 #: Why _thin_locally stopped when the next round would not fit in memory.
 LOCAL_MEMORY = "it would not fit in memory (max_memory)"
+#: Why _thin_locally stopped before a deeper step estimated above the whole band at the
+#: fallback's finest size: the fallback ends there anyway.  Random unions and differences
+#: of boxes, spheres and cylinders with slivers of 1e-5 made five losing steps of 0.7-4.8 M
+#: tets (7 s at diag/40, 17 at /80) before the whole band kept the solid with 0.55 M.
+LOCAL_OVER_WHOLE = ("a step near thin places at {size:.4g} is estimated at {tets} tets, more than the whole band at "
+                    "{whole_size:.4g} ({whole_tets})")
 #: Default min_size: size divided by this.  Only the band near thin places goes that deep by
 #: default (walls of 1-2 x size / 8 need it: at size / 8 they come apart, session 13's fuzzing).
 DEFAULT_MIN_SIZE_DIVISOR = 16
