@@ -139,6 +139,7 @@ def test_thin_solid_warns_or_fails_with_advice_when_refinement_is_off():
     assert "size = 0.015" in result.report.warnings[0]
 
 
+_BUNNY = DATA / "bunny.stl"
 _FIN_PART = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + manifold3d.Manifold.cube([1.0, 0.03, 0.5]).translate([0, 0, 0.5])
 
 
@@ -252,6 +253,31 @@ def test_steps_near_thin_places_stop_above_the_whole_band(monkeypatch, whole_tet
                                               "lost", None, None, {}, whole=(0.0125, whole_tets))
     assert result is None and not halve and len(made) == steps
     assert why.startswith("min_size" if steps == 2 else "a step near thin places at 0.00625 is estimated at")
+
+
+@pytest.mark.parametrize("tighter", [5.0, 12.0])
+def test_a_one_level_pass_outside_the_bound_is_made_again_and_mended(monkeypatch, tighter):
+    """A one-level pass whose measured extremes leave DIHEDRAL_BOUND (here one tighter than
+    the proven bound by ``tighter`` degrees at both ends) runs again measuring every stuffed
+    tet and trying other warps near the bad ones: 5 degrees in, all mend; 12 in, the tets
+    still outside are counted and warned about."""
+    from paroct import mesher, stuffing
+
+    plain = mesh(_BUNNY, divisions=40)
+    assert "warps" not in plain.report.stage_seconds  # no measuring pass where the bound holds
+    bound = (plain.report.min_dihedral + tighter, plain.report.max_dihedral - tighter)
+    monkeypatch.setattr(mesher, "DIHEDRAL_BOUND", bound)
+    monkeypatch.setattr(stuffing, "DIHEDRAL_BOUND", bound)
+    mended = mesh(_BUNNY, divisions=40, thin_features=False)
+    rep = mended.report
+    q = tet_quality(mended.mesh.points, mended.mesh.tets)
+    outside = int(((q.min_dihedral < bound[0]) | (q.max_dihedral > bound[1])).sum())
+    assert "warps" in rep.stage_seconds and outside <= rep.bad_tets
+    assert (rep.bad_tets > 0) == (tighter > 10) == any(f"{rep.bad_tets} tets stayed outside" in w for w in rep.warnings)
+    if tighter < 10:
+        assert outside == 0 and bound[0] <= rep.min_dihedral and rep.max_dihedral <= bound[1]
+    assert rep.min_dihedral > plain.report.min_dihedral and rep.max_dihedral < plain.report.max_dihedral
+    _assert_valid(mended.mesh.points, mended.mesh.tets, load_surface(_BUNNY))
 
 
 def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):

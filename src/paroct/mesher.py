@@ -6,6 +6,7 @@ and turns their findings into the report.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -481,10 +482,20 @@ def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
 
 
 def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
-             progress: Callable[[str], None] | None) -> tuple[MeshResult, str, str, ThinFeatures | None]:
+             progress: Callable[[str], None] | None, *, mend: bool = False) -> tuple[MeshResult, str, str, ThinFeatures | None]:
     """One meshing pass at the field's boundary size: (result, what the mesh lost or '', advice,
     the walls and gaps whose sides face each other squarely (THIN_FACING), found only if the
-    mesh lost something)."""
+    mesh lost something).
+
+    The band is one level, where Labelle and Shewchuk prove the stuffed tets within
+    DIHEDRAL_BOUND; the report's extremes, measured anyway, check it.  Should a tet fall
+    outside (random unions and differences of boxes, spheres and cylinders gave 10.50
+    degrees: three vertices of a +000 lattice tet warped 0.39-0.41 of a short edge, two of
+    them off the tet), the pass runs again with ``mend``: every stuffed tet measured and
+    other warps tried near the bad ones (_mend), as where the band changes level."""
+    if not mend:
+        fresh = dataclasses.replace(report, stage_seconds=report.stage_seconds, warnings=list(report.warnings),
+                                    notes=list(report.notes))
     stages = _Stages(report, progress)
     h = field.size
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
@@ -520,12 +531,30 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     # Stuffing needs only the coordinates, tets, classes and cut edges: the leaves' corner and
     # split ids, the leaves and the band's cells are freed before it allocates its output.
     del vertices, band, keys, levels
-    points, out_tets, _ = stuff(frame.to_space(coords), coords, tets, inside, cuts, targets)
+    lattice_points = frame.to_space(coords)
+    points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=mend)
     stages.done("stuff")
+    if mend:
+        # The band's cut-edge table has heads for the band's vertices only (its edges all
+        # lie among them); retarget_warps looks up every vertex of the bad tets' stars.
+        head, upper, chain = cuts.table
+        head = np.concatenate([head, np.full(coords.shape[0] - head.shape[0], -1, dtype=head.dtype)])
+        cuts = dataclasses.replace(cuts, table=(head, upper, chain))
+        points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, tets, inside, cuts, targets, points,
+                                                          out_tets, offsets)
+        report.bad_tets = int(np.count_nonzero((flags & OUTSIDE) != 0))
+        stages.done("warps")
     # The lattice's tets and coordinates and the cut-edge tables are done with: freed before
     # _finish's face matching allocates its own, they are not in the peak.
-    del coords, tets, cuts
+    del coords, tets, cuts, lattice_points, offsets
     result = _finish(points, out_tets, inside, targets, report, stages, surface, h)
+    if not mend and report.n_tets and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]:
+        for name in MeshReport.__dataclass_fields__:  # the caller's report, as it came in
+            setattr(report, name, getattr(fresh, name))
+        return _mesh_at(surface, field, report, progress, mend=True)
+    if report.bad_tets:
+        report.warnings.append(f"{report.bad_tets} tets stayed outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
+                               "degrees after other warps were tried near them")
     lost = _losses(report, surface)
     advice, walls = "", None
     if lost:
@@ -762,24 +791,10 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
     # changes level may give tets outside the bound.  Other warps near them mend most; where
     # they do not, this pass only says where the band must be finer.
-    flags = _outside_bound(points, out_tets, _core(inside, targets, points.shape[0]))
-    for _ in range(RETARGET_PASSES):
-        if not flags.any():
-            break
-        # points follow the new warps in place: restuff takes them as they are.
-        new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
-                                              np.flatnonzero(flags != 0), NEEDLE_RATIO, offsets=offsets, points=points)
-        if not changed:
-            break
-        # Only the lattice tets around the vertices that warp elsewhere change: stuff and
-        # measure those again; the others' tets and flags move in place.
-        points, out_tets, again, offsets, flags = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
-                                                          new_targets, offsets=offsets, flat_ok=True, points=points,
-                                                          flags=flags)
-        targets = new_targets
-        flags[again] = _outside_bound(points, np.take(out_tets, again, axis=0), _core(inside, targets, points.shape[0]))
-    # != 0 here and above: np.flatnonzero of a bool mask is 20x faster than of uint8 (0.4 vs 8 ms
-    # on fea_part's 2.7 M tets at diag/80).
+    points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, tets, inside, cuts, targets, points,
+                                                      out_tets, offsets)
+    # != 0: np.flatnonzero of a bool mask is 20x faster than of uint8 (0.4 vs 8 ms on
+    # fea_part's 2.7 M tets at diag/80).
     bad = np.flatnonzero((flags & OUTSIDE) != 0)
     stages.done("warps")
     lattice = out_tets[bad].astype(np.int64)
@@ -810,6 +825,31 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # As in _mesh_at: what stuffing needed is freed before _finish allocates.
     del coords, tets, cuts, spacing, lattice_points, flags, offsets
     return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
+
+
+def _mend(lattice_points, coords, tets, inside, cuts: CutEdges, targets, points, out_tets,
+          offsets) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Measure the stuffed tets (stuff's points, out_tets, offsets for these lattice tets and
+    warp targets) and try other warps near those outside DIHEDRAL_BOUND or needles
+    (retarget_warps), restuffing and measuring again, RETARGET_PASSES times at most.
+    Returns (points, out_tets, targets, offsets, flags (M,) uint8: outlier_flags' verdicts)."""
+    flags = _outside_bound(points, out_tets, _core(inside, targets, points.shape[0]))
+    for _ in range(RETARGET_PASSES):
+        if not flags.any():
+            break
+        # points follow the new warps in place: restuff takes them as they are.
+        new_targets, changed = retarget_warps(lattice_points, coords, tets, inside, cuts, targets,
+                                              np.flatnonzero(flags != 0), NEEDLE_RATIO, offsets=offsets, points=points)
+        if not changed:
+            break
+        # Only the lattice tets around the vertices that warp elsewhere change: stuff and
+        # measure those again; the others' tets and flags move in place.
+        points, out_tets, again, offsets, flags = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
+                                                          new_targets, offsets=offsets, flat_ok=True, points=points,
+                                                          flags=flags)
+        targets = new_targets
+        flags[again] = _outside_bound(points, np.take(out_tets, again, axis=0), _core(inside, targets, points.shape[0]))
+    return points, out_tets, targets, offsets, flags
 
 
 def _core(inside: np.ndarray, targets: np.ndarray, n_points: int) -> np.ndarray:
