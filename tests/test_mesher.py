@@ -232,29 +232,6 @@ def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_
     assert result.report.notes[-1].startswith(f"boundary size {h if halving_lost else h / 2:.4g} -> {h / 4:.4g}")
 
 
-@pytest.mark.parametrize("whole_tets, steps", [(10**15, 2), (0, 1)])
-def test_steps_near_thin_places_stop_above_the_whole_band(monkeypatch, whole_tets, steps):
-    """Every step near a 0.001 gap 'loses': with the whole band at the fallback's floor
-    estimated above them, the steps go on to min_size (size / 8, then / 16); estimated below,
-    only the first is made."""
-    from paroct import mesher
-
-    made = []
-
-    def step(surface, field, framed, wanted, report, progress, window):
-        made.append(wanted)
-        return "a mesh", None
-
-    monkeypatch.setattr(mesher, "_mesh_locally", step)
-    monkeypatch.setattr(mesher, "_losses", lambda report, surface: "the mesh lost the gap")
-    surface = load_surface(manifold3d.Manifold.cube([1, 1, 1]))
-    gap = ThinFeatures(np.array([0.001]), np.full((1, 3), 0.5), np.zeros(1, dtype=bool), np.full(1, -1.0))
-    result, why, halve = mesher._thin_locally(surface, mesher.size_field(0.1, None, (), None), gap, 0.1 / 16, 2**40,
-                                              "lost", None, None, {}, whole=(0.0125, whole_tets))
-    assert result is None and not halve and len(made) == steps
-    assert why.startswith("min_size" if steps == 2 else "a step near thin places at 0.00625 is estimated at")
-
-
 @pytest.mark.parametrize("tighter", [5.0, 12.0])
 def test_a_one_level_pass_outside_the_bound_is_made_again_and_mended(monkeypatch, tighter):
     """A one-level pass whose measured extremes leave DIHEDRAL_BOUND (here one tighter than

@@ -199,8 +199,7 @@ def mesh(
     estimated at fewer tets than refining near the thin places, at size / 2; else, or if that
     still loses, with the boundary refined only near the walls and gaps thinner than 2 * size
     and the missed parts, to two element layers across each (first at most size / 8, then
-    deeper while it still loses, down to min_size, default size / 16, unless a step is
-    estimated above the whole boundary at size / 8), every tet measured,
+    deeper while it still loses, down to min_size, default size / 16), every tet measured,
     other warps tried near any outside [10.7, 164.8] degrees (and near needles, 3r/R below
     NEEDLE_RATIO) and the band refined where they do not mend an angle; if that does not keep
     the solid, the whole boundary size shrinks by halves instead, as far as max_memory allows
@@ -235,9 +234,8 @@ def mesh(
             if (report.missed_vertices.size == 0 and abs(report.volume_error) < VOLUME_LOSS_WARNING * HALVING_GAIN
                     and h / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, h / 2, budget)):
                 halved = estimate_tets(surface, _at_boundary_size(field, h / 2))
-            whole = (whole_floor, estimate_tets(surface, _at_boundary_size(field, whole_floor)))
             local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress,
-                                              stage_seconds, whole=whole)
+                                              stage_seconds)
             tried = []
             if halve:
                 half = _pass_report(surface, field, h / 2, stage_seconds)
@@ -249,8 +247,7 @@ def mesh(
                 halved_lost = True
                 tried = [f"boundary refined to {h / 2:.4g} everywhere ({why}): at {h / 2:.4g} {still}; "
                          f"refining near thin places from {h:.4g} instead"]
-                local, why, _ = _thin_locally(surface, field, walls, floor, budget, lost, None, progress, stage_seconds,
-                                              whole=whole)
+                local, why, _ = _thin_locally(surface, field, walls, floor, budget, lost, None, progress, stage_seconds)
             if local is not None:
                 first, *rest = local.report.notes
                 local.report.notes = [*notes, first, *tried, *rest]
@@ -304,8 +301,8 @@ def _local_depth(size: float, floor: float) -> int:
 
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
-                  halved: int | None, progress: Callable[[str], None] | None, stage_seconds: dict, *,
-                  whole: tuple[float, int] | None = None) -> tuple[MeshResult | None, str, bool]:
+                  halved: int | None, progress: Callable[[str], None] | None,
+                  stage_seconds: dict) -> tuple[MeshResult | None, str, bool]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
     one level more while the mesh still loses topology or volume.  Returns (result, '', False);
@@ -313,10 +310,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     memory budget reached; the rounds stopped finding fewer tets outside the bound), and the
     caller refines the whole band; or (None, why, True) when no round was made because halved,
     estimate_tets of the whole band at size / 2 (None: not to be tried), is below the first
-    round's _local_tets, and the caller tries the whole band at size / 2 (HALVING_GAIN).
-    whole: (size, estimate_tets) of the whole band at the finest size the caller's fallback
-    goes to; a deeper step after the first is not made once its _local_tets exceeds that
-    (LOCAL_OVER_WHOLE)."""
+    round's _local_tets, and the caller tries the whole band at size / 2 (HALVING_GAIN)."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
     if max_depth < 1:  # min_size leaves no finer level to refine to
@@ -342,8 +336,6 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                 break
             cap, extra = deeper
             continue
-        if step > 0 and whole is not None and local > whole[1]:
-            return None, LOCAL_OVER_WHOLE.format(size=frame.h, tets=local, whole_size=whole[0], whole_tets=whole[1]), False
         tried = wanted
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
@@ -436,12 +428,6 @@ def _next_ask(coarse: FatFrame, walls: ThinFeatures, depth: np.ndarray, cap: int
 HALVING_GAIN = 4
 #: Why _thin_locally stopped when the next round would not fit in memory.
 LOCAL_MEMORY = "it would not fit in memory (max_memory)"
-#: Why _thin_locally stopped before a deeper step estimated above the whole band at the
-#: fallback's finest size: the fallback ends there anyway.  Random unions and differences
-#: of boxes, spheres and cylinders with slivers of 1e-5 made five losing steps of 0.7-4.8 M
-#: tets (7 s at diag/40, 17 at /80) before the whole band kept the solid with 0.55 M.
-LOCAL_OVER_WHOLE = ("a step near thin places at {size:.4g} is estimated at {tets} tets, more than the whole band at "
-                    "{whole_size:.4g} ({whole_tets})")
 #: Default min_size: size divided by this.  Only the band near thin places goes that deep by
 #: default (walls of 1-2 x size / 8 need it: at size / 8 they come apart, session 13's fuzzing).
 DEFAULT_MIN_SIZE_DIVISOR = 16
