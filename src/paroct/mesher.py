@@ -473,12 +473,12 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     the walls and gaps whose sides face each other squarely (THIN_FACING), found only if the
     mesh lost something).
 
-    The band is one level, where Labelle and Shewchuk prove the stuffed tets within
-    DIHEDRAL_BOUND; the report's extremes, measured anyway, check it.  Should a tet fall
-    outside (random unions and differences of boxes, spheres and cylinders gave 10.50
-    degrees: three vertices of a +000 lattice tet warped 0.39-0.41 of a short edge, two of
-    them off the tet), the pass runs again with ``mend``: every stuffed tet measured and
-    other warps tried near the bad ones (_mend), as where the band changes level."""
+    The band is one level, the setting of Labelle and Shewchuk's bound (DIHEDRAL_BOUND); the
+    report's extremes, measured anyway, check it.  Should a tet fall outside (a random union
+    and difference of boxes, spheres and cylinders gave 10.50 degrees: three vertices of a
+    +000 lattice tet warped 0.39-0.41 of a short edge, two of them off the tet; see
+    docs/design.md), the pass runs again with ``mend``: every stuffed tet measured and other
+    warps tried near the bad ones (_mend), as where the band changes level."""
     if not mend:
         fresh = dataclasses.replace(report, stage_seconds=report.stage_seconds, warnings=list(report.warnings),
                                     notes=list(report.notes))
