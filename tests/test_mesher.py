@@ -191,7 +191,7 @@ def test_losing_rounds_deepen_held_samples_first_then_all(thickness, steps):
     max_depth, cap, extra = 6, 3, 0
     for want in steps:
         depth = _thin_asks(coarse, walls, cap, extra)[1]
-        got = _next_ask(coarse, walls, depth, cap, extra, max_depth)
+        got = _next_ask(_thin_asks(coarse, walls, max_depth, 0)[1], depth, cap, extra, max_depth)
         assert got == want
         if got is None:
             assert (_thin_asks(coarse, walls, max_depth, extra)[1] == max_depth).all()

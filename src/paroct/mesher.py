@@ -318,6 +318,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     notes = [f"at boundary size {field.size:.4g} {lost}"]
     framed, tried = None, None
     cap, extra = min(max_depth, WHOLE_BAND_DEPTH), 0
+    needs = _thin_asks(coarse, walls, max_depth, 0)[1]  # the levels each sample's two layers need
     for step in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
         frame, depth, wanted = _local_ask(coarse, walls, cap, extra)
         if depth.size == 0:
@@ -331,7 +332,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
             framed, tried = FramedSurface.build(surface, frame, coarse.levels), None
         if tried is not None and _same_band(framed, tried, wanted):
-            deeper = _next_ask(coarse, walls, depth, cap, extra, max_depth)
+            deeper = _next_ask(needs, depth, cap, extra, max_depth)
             if deeper is None:
                 break
             cap, extra = deeper
@@ -364,7 +365,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
                           f"degrees after {rounds} measure-and-refine rounds"), False
         known = walls.thickness[walls.thickness < 2 * coarse.h] > 0  # as _thin_asks picks its samples
-        beyond = int(np.max(depth - _thin_asks(coarse, walls, max_depth, 0)[1], initial=0, where=known))
+        beyond = int(np.max(depth - needs, initial=0, where=known))
         layers = f", {beyond} level{'s' * (beyond > 1)} finer than two layers need" if beyond > 0 else ""
         measured = np.flatnonzero(walls.thickness > 0)  # the others are surface the boundary missed
         thinnest = measured[np.argmin(walls.thickness[measured])] if measured.size else -1
@@ -377,7 +378,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             report.notes = notes
             return result, "", False
         notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
-        deeper = _next_ask(coarse, walls, depth, cap, extra, max_depth)
+        deeper = _next_ask(needs, depth, cap, extra, max_depth)
         if deeper is None:
             break
         cap, extra = deeper
@@ -394,17 +395,17 @@ def _same_band(framed: FramedSurface, a: BandLevels, b: BandLevels) -> bool:
     return all(np.array_equal(x, y) for x, y in zip(*cells))
 
 
-def _next_ask(coarse: FatFrame, walls: ThinFeatures, depth: np.ndarray, cap: int, extra: int,
-              max_depth: int) -> tuple[int, int] | None:
-    """(cap, extra) of _thin_locally's next round after one that still lost (depth: its
-    samples' depths, _thin_asks with max_depth = cap).  While the cap withholds from some
-    sample the levels its two layers need, the cap deepens by one and nothing else does.
+def _next_ask(needs: np.ndarray, depth: np.ndarray, cap: int, extra: int, max_depth: int) -> tuple[int, int] | None:
+    """(cap, extra) of _thin_locally's next round after one that still lost (needs: the
+    samples' depths for two layers, _thin_asks with extra 0 and max_depth; depth: the round's,
+    _thin_asks with max_depth = cap).  While the cap withholds from some sample the levels its
+    two layers need, the cap deepens by one and nothing else does.
     (Before, those samples waited at the cap while the others went one level deeper a round:
     nine 0.01 slots in a 4 x 4 x 0.5 plate at diag/40 ask 5 levels, and three passes at
     size / 8 each lost the same 1.3 %, 18.5 s in all, where size / 16 keeps the slots, 9.9.)
     Otherwise one level more for every sample (extra), the cap following once all have
     reached it; None once every sample is at max_depth (no round left)."""
-    if np.any(_thin_asks(coarse, walls, max_depth, 0)[1] > cap):
+    if np.any(needs > cap):
         return cap + 1, extra
     if depth.min() < cap:
         return cap, extra + 1
