@@ -309,6 +309,41 @@ def test_when_the_halved_band_still_loses_the_rounds_start_from_the_size_asked(m
     assert np.array_equal(local.mesh.points, result.mesh.points) and np.array_equal(local.mesh.tets, result.mesh.tets)
 
 
+def test_a_round_that_still_loses_is_followed_by_the_whole_band_where_that_is_cheaper(monkeypatch):
+    """A sphere united with a cube at diag/20 loses 1.6 % of the volume to stuffing's chords,
+    which no round near its wedge-shaped creases mends.  The first round is estimated below
+    the whole band at size / 2; once it loses, the next round is not, so the whole band at
+    size / 2 is made then (before session 34 three more rounds ran, to size / 16), and keeps
+    the solid: the mesh asked at size / 2."""
+    part = manifold3d.Manifold.sphere(1.0, 64) + manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([0.5, 0.5, 0.5])
+    surface = load_surface(part)
+    passes, real_at, real_local = [], mesher._mesh_at, mesher._mesh_locally
+
+    def whole(surface, field, report, progress, **kwargs):
+        passes.append(("whole", field.size))
+        return real_at(surface, field, report, progress, **kwargs)
+
+    def local(surface, field, *args, **kwargs):
+        passes.append(("local", field.size))
+        return real_local(surface, field, *args, **kwargs)
+
+    monkeypatch.setattr(mesher, "_mesh_at", whole)
+    monkeypatch.setattr(mesher, "_mesh_locally", local)
+    result = mesh(surface, divisions=20)
+    rep = result.report
+    h = rep.requested_size
+    assert passes == [("whole", h), ("local", h), ("whole", h / 2)]
+    assert rep.size == pytest.approx(h / 2) and not rep.warnings
+    assert "near thin walls the mesh lost" in rep.notes[-2]
+    assert rep.notes[-1].startswith(f"boundary refined to {h / 2:.4g} everywhere: the whole band at size / 2 is estimated")
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert abs(rep.volume_error) < 0.01
+    asked = mesh(surface, size=h / 2, max_size=rep.max_size, thin_features=False).mesh
+    assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
+
+
 def test_a_pass_that_loses_more_than_halving_mends_goes_to_rounds_near_thin_places():
     """A closed box with walls 0.04 thick loses a fifth of its volume at 0.1 but no surface
     vertex: halving divides stuffing's volume error by about HALVING_GAIN only, so it is not

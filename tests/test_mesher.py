@@ -202,8 +202,8 @@ def test_losing_rounds_deepen_held_samples_first_then_all(thickness, steps):
 
 @pytest.mark.parametrize("halving_lost", [False, True])
 def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_lost):
-    """When the rounds near thin places fail, the whole band shrinks by halves (skipping
-    size / 2 if the halving tried it) until a pass keeps the solid, even with a wall far
+    """When the rounds near thin places fail, the whole band shrinks by halves (skipping the
+    sizes the rounds tried, here size / 2) until a pass keeps the solid, even with a wall far
     thinner than the floor; each pass here 'loses' until size / 4."""
     from paroct import mesher
 
@@ -215,21 +215,18 @@ def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_
         sizes.append(field.size)
         return result, ("the mesh lost a wall" if field.size > h / 3 else ""), "advice", thin
 
-    def rounds(*args, **kwargs):
-        return None, "the rounds failed", False
-
-    def halving_first(*args, **kwargs):
-        return None, "estimated smaller", True
+    def rounds(surface, field, walls, floor, budget, lost, wholes, *args):
+        assert wholes == pytest.approx([h / 2, h / 4])  # above the floor, size / 8
+        tried = [h / 2] if halving_lost else []
+        return None, "the rounds failed", tried, [f"tried {s}" for s in tried]
 
     monkeypatch.setattr(mesher, "_mesh_at", pass_losing_above_quarter)
-    monkeypatch.setattr(mesher, "_thin_locally", halving_first if halving_lost else rounds)
-    if halving_lost:  # the second call, after the halving lost, is the rounds'
-        calls = iter([halving_first, rounds])
-        monkeypatch.setattr(mesher, "_thin_locally", lambda *a, **k: next(calls)(*a, **k))
+    monkeypatch.setattr(mesher, "_thin_locally", rounds)
     result = mesh(manifold3d.Manifold.cube([1, 1, 1]), size=h)
-    assert sizes == pytest.approx([h, h / 2, h / 4])
+    assert sizes == pytest.approx([h, h / 4] if halving_lost else [h, h / 2, h / 4])
     assert result.report.size == pytest.approx(h / 4) and not result.report.warnings
     assert result.report.notes[-1].startswith(f"boundary size {h if halving_lost else h / 2:.4g} -> {h / 4:.4g}")
+    assert (f"tried {h / 2}" in result.report.notes) == halving_lost
 
 
 @pytest.mark.parametrize("tighter", [5.0, 12.0])

@@ -201,9 +201,11 @@ def mesh(
     and the missed parts, to two element layers across each (first at most size / 8, then
     deeper while it still loses, down to min_size, default size / 16), every tet measured,
     other warps tried near any outside [10.7, 164.8] degrees (and near needles, 3r/R below
-    NEEDLE_RATIO) and the band refined where they do not mend an angle; if that does not keep
-    the solid, the whole boundary size shrinks by halves instead, as far as max_memory allows
-    (not below size / 8 unless min_size is given).  The report's notes say what was done.
+    NEEDLE_RATIO) and the band refined where they do not mend an angle; before a deeper round,
+    the whole boundary at the coarsest of size / 2, size / 4, ... not yet tried, where
+    estimated at fewer tets than that round; if that does not keep the solid, the whole
+    boundary size shrinks by halves instead (skipping the sizes tried), as far as max_memory
+    allows (not below size / 8 unless min_size is given).  The report's notes say what was done.
     False keeps size and only warns.  A mesh that keeps less than half the solid's volume
     raises ParoctError, as one with no tets does.  max_memory: bytes the run may use
     (default: the machine's available memory); a size that would need more is refused before
@@ -224,45 +226,43 @@ def mesh(
         progress("load")
 
     band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
-    memory_bound = halved_lost = False
+    memory_bound, tried = False, []  # tried: whole-band sizes below h that a pass lost at
     while True:
         report = _pass_report(surface, field, band, stage_seconds)
         attempt = _at_boundary_size(field, band)
         result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
         if thin_features and lost and band == h and walls is not None:
-            halved = None
-            if (report.missed_vertices.size == 0 and abs(report.volume_error) < VOLUME_LOSS_WARNING * HALVING_GAIN
-                    and h / 2 >= whole_floor * (1 - 1e-9) and _fits(surface, field, h / 2, budget)):
-                halved = estimate_tets(surface, _at_boundary_size(field, h / 2))
-            local, why, halve = _thin_locally(surface, field, walls, floor, budget, lost, halved, progress,
-                                              stage_seconds)
-            tried = []
-            if halve:
-                half = _pass_report(surface, field, h / 2, stage_seconds)
-                kept, still, _, _ = _mesh_at(surface, _at_boundary_size(field, h / 2), half, progress)
-                if not still:
-                    half.notes = [f"at boundary size {h:.4g} {lost}",
-                                  f"boundary refined to {h / 2:.4g} everywhere: {why}"]
-                    return kept
-                halved_lost = True
-                tried = [f"boundary refined to {h / 2:.4g} everywhere ({why}): at {h / 2:.4g} {still}; "
-                         f"refining near thin places from {h:.4g} instead"]
-                local, why, _ = _thin_locally(surface, field, walls, floor, budget, lost, None, progress, stage_seconds)
+            # The whole band at h / 2, h / 4, ... as memory allows, for _thin_locally to try
+            # where one is estimated at fewer tets than its next round; h / 2 only where
+            # halving can mend what the pass lost (HALVING_GAIN).  Not at whole_floor: should
+            # everything lose, the pass there is the one returned, as before session 34.
+            wholes, whole = [], h / 2
+            while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
+                wholes.append(whole)
+                whole /= 2
+            if report.missed_vertices.size or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
+                wholes = [s for s in wholes if s != h / 2]
+            local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes, progress,
+                                                           stage_seconds)
             if local is not None:
-                first, *rest = local.report.notes
-                local.report.notes = [*notes, first, *tried, *rest]
+                local.report.notes = [*notes, *local.report.notes]
                 return local
-            notes.extend(tried)
+            notes.extend(tried_notes)
             if why:
                 notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
                 memory_bound = why == LOCAL_MEMORY
-        # By halves, the coarsest first (skipping size / 2 if the halving above lost): what
+        # By halves, the coarsest first (skipping the sizes _thin_locally tried): what
         # the rounds near thin places could not keep comes out joined or split at any size,
         # and a coarser band may keep what a finer one loses.  Going straight to two layers
         # across the thinnest wall, as before, took random unions and differences of boxes,
         # spheres and cylinders at diag/40 (session 33) to size / 8 with a changed genus
         # and 2.6 M tets, where size / 4 keeps the solid with 0.55 M.
-        finer = max(band / (4 if band == h and halved_lost else 2), whole_floor)
+        finer = band / 2
+        while any(abs(finer - s) <= 1e-9 * s for s in tried):
+            finer /= 2
+        finer = max(finer, whole_floor)
+        if any(abs(finer - s) <= 1e-9 * s for s in tried):
+            finer = band
         while finer < band * (1 - 1e-9) and not _fits(surface, field, finer, budget):
             finer, memory_bound = finer * 2, True
         if not (thin_features and lost and finer < band * (1 - 1e-9)):
@@ -301,47 +301,70 @@ def _local_depth(size: float, floor: float) -> int:
 
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
-                  halved: int | None, progress: Callable[[str], None] | None,
-                  stage_seconds: dict) -> tuple[MeshResult | None, str, bool]:
+                  wholes: Sequence[float], progress: Callable[[str], None] | None,
+                  stage_seconds: dict) -> tuple[MeshResult | None, str, list[float], list[str]]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
-    one level more while the mesh still loses topology or volume.  Returns (result, '', False);
-    or (None, why, False) when that did not succeed (no thin place found: ''; the floor or the
+    one level more while the mesh still loses topology or volume.
+
+    wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
+    Before a round, the coarsest not yet tried is meshed over the whole band when
+    estimate_tets puts it below the round's _local_tets (before the first round, only
+    size / 2: HALVING_GAIN), once each; the rounds go on where it loses.  The rounds' local
+    volume error is what the thin places lose, and stuffing's error elsewhere (second order in
+    size, a chord's) none of them mends: a sphere of 0.5 M triangles united with a cube lost
+    1.5-1.7 % at diag/20 in four rounds to size / 16, 1.0 s, and the whole band at size / 2
+    keeps it.
+
+    Returns (result, '', tried, []) with the notes in the result's report; or (None, why,
+    tried, notes) when that did not succeed (no thin place found: why = ''; the floor or the
     memory budget reached; the rounds stopped finding fewer tets outside the bound), and the
-    caller refines the whole band; or (None, why, True) when no round was made because halved,
-    estimate_tets of the whole band at size / 2 (None: not to be tried), is below the first
-    round's _local_tets, and the caller tries the whole band at size / 2 (HALVING_GAIN)."""
+    caller refines the whole band.  tried: the whole-band sizes that lost; notes: theirs."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
+    wholes, tried, tried_notes = list(wholes), [], []
     if max_depth < 1:  # min_size leaves no finer level to refine to
-        return None, "", False
+        return None, "", tried, tried_notes
     notes = [f"at boundary size {field.size:.4g} {lost}"]
-    framed, tried = None, None
+    framed, tried_band = None, None
     cap, extra = min(max_depth, WHOLE_BAND_DEPTH), 0
     needs = _thin_asks(coarse, walls, max_depth, 0)[1]  # the levels each sample's two layers need
     for step in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
         frame, depth, wanted = _local_ask(coarse, walls, cap, extra)
         if depth.size == 0:
-            return None, "", False
+            return None, "", tried, tried_notes
         if frame.levels > MAX_FRAME_LEVELS:
-            return None, f"a frame of {frame.levels} levels is too deep", False
+            return None, f"a frame of {frame.levels} levels is too deep", tried, tried_notes
         local = _local_tets(surface, field, wanted)
-        if step == 0 and halved is not None and halved < local:
-            return None, (f"the whole band at size / 2 is estimated at {halved} tets, fewer than the {local} "
-                          "of a round near them"), True
+        if wholes and (step > 0 or wholes[0] == field.size / 2):
+            whole = estimate_tets(surface, _at_boundary_size(field, wholes[0]))
+            if whole < local:
+                size = wholes.pop(0)
+                why = (f"the whole band at size / {field.size / size:g} is estimated at {whole} tets, fewer than the "
+                       f"{local} of a round near them")
+                report = _pass_report(surface, field, size, stage_seconds)
+                kept, still, _, _ = _mesh_at(surface, _at_boundary_size(field, size), report, progress)
+                if not still:
+                    report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}"]
+                    return kept, "", tried, []
+                tried.append(size)
+                note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
+                        f"refining near thin places from {field.size:.4g} instead")
+                notes.append(note)
+                tried_notes.append(note)
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
-            framed, tried = FramedSurface.build(surface, frame, coarse.levels), None
-        if tried is not None and _same_band(framed, tried, wanted):
+            framed, tried_band = FramedSurface.build(surface, frame, coarse.levels), None
+        if tried_band is not None and _same_band(framed, tried_band, wanted):
             deeper = _next_ask(needs, depth, cap, extra, max_depth)
             if deeper is None:
                 break
             cap, extra = deeper
             continue
-        tried = wanted
+        tried_band = wanted
         fewest, stalled, window = np.iinfo(np.int64).max, 0, None
         for rounds in range(1, MAX_REFINE_ROUNDS + 1):
             if local * BYTES_PER_TET > budget:
-                return None, LOCAL_MEMORY, False
+                return None, LOCAL_MEMORY, tried, tried_notes
             report = _pass_report(surface, field, frame.h, stage_seconds)
             result, asks = _mesh_locally(surface, field, framed, wanted, report, progress, window)
             if result is not None:
@@ -363,7 +386,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             local = _local_tets(surface, field, wanted)
         if result is None:
             return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
-                          f"degrees after {rounds} measure-and-refine rounds"), False
+                          f"degrees after {rounds} measure-and-refine rounds"), tried, tried_notes
         known = walls.thickness[walls.thickness < 2 * coarse.h] > 0  # as _thin_asks picks its samples
         beyond = int(np.max(depth - needs, initial=0, where=known))
         layers = f", {beyond} level{'s' * (beyond > 1)} finer than two layers need" if beyond > 0 else ""
@@ -376,13 +399,13 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         still = _losses(report, surface)
         if not still:
             report.notes = notes
-            return result, "", False
+            return result, "", tried, []
         notes.append(f"at boundary size {frame.h:.4g} near thin walls {still}")
         deeper = _next_ask(needs, depth, cap, extra, max_depth)
         if deeper is None:
             break
         cap, extra = deeper
-    return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost", False
+    return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost", tried, tried_notes
 
 
 def _same_band(framed: FramedSurface, a: BandLevels, b: BandLevels) -> bool:
