@@ -229,6 +229,46 @@ def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_
     assert (f"tried {h / 2}" in result.report.notes) == halving_lost
 
 
+@pytest.mark.parametrize("changes_at", [None, 1])
+def test_rounds_at_min_size_stop_once_they_lose_the_same(monkeypatch, changes_at):
+    """Once the samples are at min_size (cap = max_depth), rounds that each go a level deeper
+    for the others stop when SAME_LOSS_ROUNDS in a row lost the same as the round before; a
+    loss that changes restarts the count.  Every round here 'loses' the same but round
+    changes_at; a wall far below min_size and one needing a level keep the asks changing."""
+    from paroct import mesher
+
+    h, rounds = 0.1, []
+    top = np.array([[0.5, 0.5, 1.0], [0.2, 0.2, 1.0]])
+    thin = ThinFeatures(np.array([1e-4, 0.19]), top, np.ones(2, dtype=bool), np.full(2, -1.0))
+
+    def losses(report, surface):
+        if report.size == h:  # the first pass
+            return "the mesh lost a wall"
+        return "the boundary has 3 components" if len(rounds) - 1 == changes_at else "the boundary has 2 components"
+
+    def local(*args, **kwargs):
+        rounds.append(1)
+        return real_local(*args, **kwargs)
+
+    def first_pass_with_thin_walls(surface, field, report, progress, **kwargs):
+        result, _, advice, _ = real_at(surface, field, report, progress, **kwargs)
+        return result, losses(report, surface), advice, thin
+
+    real_local, real_at = mesher._mesh_locally, mesher._mesh_at
+    monkeypatch.setattr(mesher, "_losses", losses)
+    monkeypatch.setattr(mesher, "_next_ask", lambda needs, depth, cap, extra, max_depth: (max_depth, extra + 1))
+    monkeypatch.setattr(mesher, "_mesh_locally", local)
+    monkeypatch.setattr(mesher, "_mesh_at", first_pass_with_thin_walls)
+    monkeypatch.setattr(mesher, "_fits", lambda *args: False)  # no whole band: only the rounds
+    result = mesh(manifold3d.Manifold.cube([1, 1, 1]), size=h, min_size=h / 64)
+    # The first round is below the floor's cap; then one with a change, if any, and
+    # SAME_LOSS_ROUNDS + 1 alike.  Without the rule they would run until the thick wall's
+    # asks reach max_depth (five after the first).
+    assert len(rounds) == 1 + (changes_at is not None) + mesher.SAME_LOSS_ROUNDS + 1
+    assert any(f"{mesher.SAME_LOSS_ROUNDS} rounds one level deeper each" in note for note in result.report.notes)
+    assert result.report.warnings
+
+
 @pytest.mark.parametrize("tighter", [5.0, 12.0])
 def test_a_one_level_pass_outside_the_bound_is_made_again_and_mended(monkeypatch, tighter):
     """A one-level pass whose measured extremes leave DIHEDRAL_BOUND (here one tighter than
