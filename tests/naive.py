@@ -517,3 +517,28 @@ def retarget(vertices, star_first, stars, option_first, options, tets, signs, ta
             moved += best_target != current
         if moved == 0:
             break
+
+
+def first_winding_outside(keys: np.ndarray, fracs: np.ndarray, signs: np.ndarray, tie: float, key_bits: int) -> int:
+    """rays.first_winding_outside on plain lists: split the crossings into rows (key >> key_bits),
+    each row into runs of crossings less than tie cells after the one before, and sum the
+    runs' signs along the row; the index of the first run that ends outside {0, 1}, or -1."""
+    rows: dict[int, list[int]] = {}
+    for i, key in enumerate(keys.tolist()):
+        rows.setdefault(key >> key_bits, []).append(i)
+    found = []
+    for members in rows.values():
+        runs = [[members[0]]]
+        for a, b in zip(members, members[1:]):
+            gap = float(int(keys[b]) - int(keys[a])) + (float(fracs[b]) - float(fracs[a]))
+            if gap <= tie:
+                runs[-1].append(b)
+            else:
+                runs.append([b])
+        winding = 0
+        for run in runs:
+            winding += sum(int(signs[i]) for i in run)
+            if winding not in (0, 1):
+                found.append(run[0])
+                break
+    return min(found, default=-1)

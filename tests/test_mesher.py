@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from paroct import rays
+from paroct.check import distances_to_triangles
 from paroct.errors import ParoctError
 from paroct.features import FACING, ThinFeatures, thin_features
 from paroct.frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, fat_frame
@@ -593,3 +594,32 @@ def test_compact_keeps_the_used_points_in_order(n_points, n_tets):
     np.testing.assert_array_equal(got_points, points[used])
     np.testing.assert_array_equal(got_tets, want_tets)
     assert got_tets is tets  # renumbered in place
+
+
+def _bent_bar_overlapping_itself():
+    """One closed shell without an edge or vertex out of place whose ends pass through each
+    other: a 7 x 1 x 1 bar bent round a circle of circumference 6 (and risen along it)."""
+    radius = 6.0 / (2 * np.pi)
+
+    def bend(p):
+        angle = p[0] / radius
+        return [(radius + p[1]) * np.cos(angle), (radius + p[1]) * np.sin(angle), p[2] + 0.15 * angle]
+
+    ring = manifold3d.Manifold.cube([7.0, 1.0, 1.0]).refine(40).warp(bend).to_mesh()
+    return np.asarray(ring.vert_properties, dtype=np.float64)[:, :3], np.asarray(ring.tri_verts)[:, ::-1].copy()
+
+
+def test_a_surface_overlapping_itself_is_refused_where_it_does():
+    """Its faces pass every check of a closed manifold, and its signed volume is positive, but
+    its ends overlap: no mesh of it could match its volume and topology.  The point named lies
+    on the surface where the lines enter the solid a second time, in the overlap."""
+    vertices, faces = _bent_bar_overlapping_itself()
+    surface = load_surface((vertices, faces))
+    assert surface.volume > 0 and surface.components == 1
+    with pytest.raises(ParoctError, match=r"the surface intersects itself: a line through \(([-\d.e+]+), ([-\d.e+]+), "
+                                          r"([-\d.e+]+)\) enters or leaves the solid twice in a row") as error:
+        mesh(surface, divisions=20)
+    point = np.array([float(x) for x in error.value.args[0].split("(")[1].split(")")[0].split(",")])
+    assert distances_to_triangles(point[None], vertices, faces)[0] < 1e-5 * surface.diagonal
+    angle = np.arctan2(point[1], point[0]) % (2 * np.pi)
+    assert angle < 2 * np.pi * 1.0 / 7 + 0.3 or angle > 2 * np.pi - 0.3  # where the ends meet, near angle 0

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, FatFrame, row_basis
-from .rays import _KEY_BITS, _KEY_OFFSET, RowCrossings
+from .frame import EDGE_DIRECTIONS, LATTICE_TO_SPACE, FatFrame
+from .rays import _KEY_BITS, RowCrossings, crossing_points
 
 #: Two crossed triangles face each other when their unit normals have dot product below this.
 FACING = -0.5
@@ -120,15 +120,7 @@ def thin_features(frame: FatFrame, crossings: dict, vertices: np.ndarray, faces:
                                                  step, facing)
         if first.size == 0:
             continue
-        # Position of the first crossing: row (p2, p3) and cell j back to lattice coordinates.
-        key = rc.keys[first]
-        mask = (np.int64(1) << _KEY_BITS) - 1
-        tu = np.stack([(key & mask) - _KEY_OFFSET,
-                       ((key >> _KEY_BITS) & mask) - _KEY_OFFSET,
-                       ((key >> (2 * _KEY_BITS)) & mask) - _KEY_OFFSET], axis=1)[:, [0, 2, 1]]
-        u = np.linalg.solve(row_basis(d).astype(np.float64), tu.T.astype(np.float64)).T
-        u = u + rc.fracs[first][:, None] * EDGE_DIRECTIONS[d]
-        parts.append((thick, frame.to_space(u), wall, dots))
+        parts.append((thick, crossing_points(frame, rc, first), wall, dots))
     if not parts:
         return ThinFeatures(np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=bool), np.zeros(0))
     return ThinFeatures(*(np.concatenate(x) for x in zip(*parts)))

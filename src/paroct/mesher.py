@@ -529,6 +529,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+    _check_winding(frame, crossings[X_AXIS_DIRECTION])
     keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = _leaf_levels(frame, levels)
@@ -590,6 +591,20 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
             walls = _with_missed_parts(walls, frame, snapped, faces, report.missed_vertices)
         stages.done("features")
     return result, lost, advice, walls
+
+
+def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:
+    """Refuse a surface that a lattice row enters twice without leaving (or leaves twice):
+    parts that overlap or fold through one another.  Its solid, the points of positive
+    winding number, is not what its volume and topology say, so every check of the mesh
+    against them would mislead (a self-overlapping bent bar went to min_size and warned of
+    dropped thin parts)."""
+    bad = rays.first_winding_outside(crossings)
+    if bad >= 0:
+        x, y, z = rays.crossing_points(frame, crossings, np.array([bad]))[0]
+        raise ParoctError(f"the surface intersects itself: a line through ({x:.6g}, {y:.6g}, {z:.6g}) enters or leaves "
+                          "the solid twice in a row (overlapping or folded parts); join the overlapping parts into "
+                          "one closed surface first (e.g. a union in manifold3d or a CAD tool)")
 
 
 def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,

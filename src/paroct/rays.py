@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .frame import FatFrame, row_basis
+from .frame import EDGE_DIRECTIONS, FatFrame, row_basis
 from .octant import MAX_LEVEL, lower_bound, lower_bound_near, morton_key
 from .octree import TRIANGLE_CHUNKS, FaceBuckets, written_slots
 
@@ -460,6 +460,54 @@ def _order_cells(keys, fracs, faces, order):
             order[j] = order[j - 1]
             j -= 1
         order[j] = o
+
+
+def crossing_points(frame: FatFrame, crossings: RowCrossings, which: np.ndarray) -> np.ndarray:
+    """Space points (K, 3) of the crossings at indices which (K,): the row (p2, p3) and cell j
+    of each key back to lattice coordinates, plus its fraction along the row's direction."""
+    key = crossings.keys[which]
+    mask = (np.int64(1) << _KEY_BITS) - 1
+    tu = np.stack([(key & mask) - _KEY_OFFSET,
+                   ((key >> _KEY_BITS) & mask) - _KEY_OFFSET,
+                   ((key >> (2 * _KEY_BITS)) & mask) - _KEY_OFFSET], axis=1)[:, [0, 2, 1]]
+    u = np.linalg.solve(row_basis(crossings.direction).astype(np.float64), tu.T.astype(np.float64)).T
+    return frame.to_space(u + crossings.fracs[which][:, None] * EDGE_DIRECTIONS[crossings.direction])
+
+
+#: Crossings of a row less than this many cells apart are summed together when the winding
+#: number is checked: their float fractions may be out of their exact order.
+WINDING_TIE = 1e-9
+
+
+def first_winding_outside(crossings: RowCrossings) -> int:
+    """Index of the first crossing after which the winding number along its row is neither 0
+    nor 1, or -1 if there is none.  Along any line, a closed oriented surface that bounds a
+    solid without intersecting itself is entered and left in turn (nested shells included: a
+    cavity is left, then an island in it entered), so such a crossing shows parts that
+    overlap or fold through one another, whose winding numbers are 2 or -1."""
+    return int(_first_winding_outside(crossings.keys, crossings.fracs, crossings.signs, WINDING_TIE))
+
+
+@nb.njit(cache=True)
+def _first_winding_outside(keys, fracs, signs, tie):
+    row_mask = ~((np.int64(1) << _KEY_BITS) - 1)
+    n = keys.shape[0]
+    winding = 0
+    i = 0
+    while i < n:
+        if i == 0 or (keys[i] & row_mask) != (keys[i - 1] & row_mask):
+            winding = 0
+        j = i + 1
+        step = signs[i]
+        while j < n and (keys[j] & row_mask) == (keys[i] & row_mask) and \
+                np.float64(keys[j] - keys[j - 1]) + (fracs[j] - fracs[j - 1]) <= tie:
+            step += signs[j]
+            j += 1
+        winding += step
+        if winding < 0 or winding > 1:
+            return i
+        i = j
+    return -1
 
 
 def winding_numbers(crossings: RowCrossings, points: np.ndarray) -> np.ndarray:
