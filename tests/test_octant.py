@@ -80,6 +80,28 @@ def test_sorted_unique_matches_numpy_unique(seed):
     ordered = np.sort(np.concatenate([keys, keys[::3]]))
     out = octant.sorted_unique(ordered)
     assert np.array_equal(out, np.unique(keys)) and not np.shares_memory(out, ordered)
+    # Long enough for the radix sort: random Morton keys of a level, with repeats.
+    level_keys = octant.morton_keys(rng.integers(0, 1 << 9, size=(5000, 3))) << np.int64(3 * (octant.MAX_LEVEL - 9))
+    assert np.array_equal(octant.sorted_unique(level_keys[rng.permutation(5000)]), np.unique(level_keys))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_radix_sort_is_numpys_sort(seed):
+    """On random int64 of every range (both signs, the extremes, a few values, all equal,
+    values differing only in high or only in low bits) and lengths 0..3 * RADIX_MIN."""
+    rng = np.random.default_rng(seed)
+    info = np.iinfo(np.int64)
+    cases = [np.zeros(0, dtype=np.int64), np.array([7]), np.full(3000, -5),
+             np.array([info.max, info.min, 0, -1, 1, info.max, info.min]),
+             rng.integers(info.min, info.max, size=6000, endpoint=True),
+             rng.integers(-3, 3, size=5000),
+             rng.integers(0, 1 << 20, size=4000) << np.int64(40),  # only high bits differ
+             rng.integers(0, 2, size=4500) + np.int64(1 << 62),  # only the lowest bit differs
+             rng.choice(np.array([info.min, info.max]), size=3000)]
+    for values in cases:
+        values = np.asarray(values, dtype=np.int64)
+        got = octant.radix_sorted(values)
+        assert got.dtype == np.int64 and np.array_equal(got, np.sort(values)), values[:4]
 
 
 @pytest.mark.parametrize("seed", range(4))

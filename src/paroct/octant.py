@@ -129,6 +129,60 @@ def is_ascending(values):
     return True
 
 
+#: Arrays of at least this many int64 values are sorted by radix_sorted, shorter by np.sort.
+RADIX_MIN = 2048
+#: Bits a pass of radix_sorted sorts by: 2048 counters stay in the L1 cache.
+RADIX_BITS = 11
+
+
+@nb.njit(cache=True)
+def radix_sorted(values):
+    """values (N,) int64 in ascending order (a new array): a least-significant-digit radix
+    sort, RADIX_BITS a pass, over only the bits in which the values differ from the smallest
+    (as uint64, so any int64 range fits); the bits below all of those are skipped, so Morton
+    keys of one level (their low 3 (MAX_LEVEL - level) bits zero) take a pass per 11 bits of
+    the levels they span.  np.sort took 40-53 ns a key on the 0.05-0.4 M surface cell keys
+    of fea_part at diag/80 (this VM's numpy sorts int64 without SIMD); this, 15-25."""
+    n = values.shape[0]
+    src = np.empty(n, dtype=np.uint64)
+    if n == 0:
+        return values.copy()
+    low = values[0]
+    for i in range(n):
+        low = min(low, values[i])
+    base = np.uint64(low)
+    spread = np.uint64(0)
+    for i in range(n):
+        src[i] = np.uint64(values[i]) - base
+        spread |= src[i]
+    first = 0  # the lowest bit in which any value differs from the smallest
+    while first < 64 and (spread >> np.uint64(first)) & np.uint64(1) == 0:
+        first += 1
+    dst = np.empty(n, dtype=np.uint64)
+    count = np.empty(1 << RADIX_BITS, dtype=np.int64)
+    mask = np.uint64((1 << RADIX_BITS) - 1)
+    shift = first
+    while shift < 64 and (spread >> np.uint64(shift)) != 0:
+        count[:] = 0
+        for i in range(n):
+            count[np.int64((src[i] >> np.uint64(shift)) & mask)] += 1
+        total = 0
+        for b in range(1 << RADIX_BITS):
+            c = count[b]
+            count[b] = total
+            total += c
+        for i in range(n):
+            b = np.int64((src[i] >> np.uint64(shift)) & mask)
+            dst[count[b]] = src[i]
+            count[b] += 1
+        src, dst = dst, src
+        shift += RADIX_BITS
+    out = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        out[i] = np.int64(src[i] + base)
+    return out
+
+
 def sorted_unique(values: np.ndarray) -> np.ndarray:
     """The distinct values of a 1-D integer array, ascending.
 
@@ -139,7 +193,7 @@ def sorted_unique(values: np.ndarray) -> np.ndarray:
     """
     s = np.asarray(values).ravel()
     if not is_ascending(s):
-        s = np.sort(s)
+        s = radix_sorted(s) if s.dtype == np.int64 and s.shape[0] >= RADIX_MIN else np.sort(s)
     if s.size == 0:
         return s
     keep = np.empty(s.shape[0], dtype=bool)

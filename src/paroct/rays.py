@@ -498,7 +498,7 @@ def _first_winding_outside(keys, fracs, signs, tie):
         if i == 0 or (keys[i] & row_mask) != (keys[i - 1] & row_mask):
             winding = 0
         j = i + 1
-        step = signs[i]
+        step = np.int64(signs[i])
         while j < n and (keys[j] & row_mask) == (keys[i] & row_mask) and \
                 np.float64(keys[j] - keys[j - 1]) + (fracs[j] - fracs[j - 1]) <= tie:
             step += signs[j]
