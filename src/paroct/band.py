@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from .frame import FatFrame
-from .octant import MAX_LEVEL, morton_coords, morton_key, octants_in_cells, sorted_lookup
+from .octant import MAX_LEVEL, morton_coords, morton_key, octants_in_cells, sort_values, sorted_lookup
 from .octree import (FaceBuckets, balance, faces_meeting_cells, octant_lattice_anchors, octants_holding, octants_within,
                      surface_cells)
 from .rays import RowCrossings, winding_numbers
@@ -121,7 +121,7 @@ def _finest_per_key(coarse_level: int, keys: np.ndarray, levels: np.ndarray) -> 
 def _finest_packed(coarse_level: int, packed: np.ndarray) -> BandLevels:
     """The finest ask per cell of packed asks (see _ring_asks): one sort of the packed values,
     then the last of each cell's run (np.lexsort on keys and levels took 10x longer)."""
-    s = np.sort(packed)
+    s = sort_values(packed)
     cell = s >> _LEVEL_BITS
     last = np.ones(s.shape[0], dtype=bool)
     last[:-1] = cell[1:] != cell[:-1]

@@ -183,6 +183,12 @@ def radix_sorted(values):
     return out
 
 
+def sort_values(values: np.ndarray) -> np.ndarray:
+    """values (N,) integers in ascending order, a new array: radix_sorted for int64 of at
+    least RADIX_MIN values, else np.sort."""
+    return radix_sorted(values) if values.dtype == np.int64 and values.shape[0] >= RADIX_MIN else np.sort(values)
+
+
 def sorted_unique(values: np.ndarray) -> np.ndarray:
     """The distinct values of a 1-D integer array, ascending.
 
@@ -193,7 +199,7 @@ def sorted_unique(values: np.ndarray) -> np.ndarray:
     """
     s = np.asarray(values).ravel()
     if not is_ascending(s):
-        s = radix_sorted(s) if s.dtype == np.int64 and s.shape[0] >= RADIX_MIN else np.sort(s)
+        s = sort_values(s)
     if s.size == 0:
         return s
     keep = np.empty(s.shape[0], dtype=bool)
