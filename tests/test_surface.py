@@ -102,6 +102,33 @@ def test_volume_area_genus_and_shells_match_manifold3d(name):
     assert surface.components == len(solid.decompose())
 
 
+def test_many_shells_as_one_soup_are_united_as_manifold3d_unites_them():
+    """Separate shells in one array, in shuffled order: disjoint boxes, pairs that overlap, a
+    box with a cavity (a shell of negative volume) holding an island, one whose island holds
+    a cavity holding an island.  Each shell goes to
+    manifold3d with only its own vertices; the solid is manifold3d's union of them all."""
+    rng = np.random.default_rng(3)
+    parts = [manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([3.0 * i, 3.0 * (i % 4), 0.0]) for i in range(40)]
+    parts += [manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([3.0 * i + 0.5, 3.0 * (i % 4) + 0.5, 0.5])
+              for i in range(0, 40, 7)]
+    hollow = manifold3d.Manifold.cube([4.0, 4.0, 4.0]) - manifold3d.Manifold.cube([2.0, 2.0, 2.0]).translate([1, 1, 1])
+    island = manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([1.5, 1.5, 1.5])
+    # An island with a cavity of its own, holding another island: four levels of nesting.
+    ring = manifold3d.Manifold.cube([1.6, 1.6, 1.6]) - manifold3d.Manifold.cube([0.8, 0.8, 0.8]).translate([0.4] * 3)
+    parts += [hollow.translate([0.0, 0.0, 10.0]), island.translate([0.0, 0.0, 10.0]), hollow.translate([20.0, 0.0, 10.0]),
+              ring.translate([21.2, 1.2, 11.2]), manifold3d.Manifold.cube([0.4, 0.4, 0.4]).translate([21.8, 1.8, 11.8])]
+    arrays = [_arrays(p) for p in parts]
+    order = rng.permutation(len(arrays))
+    offsets = np.cumsum([0] + [arrays[i][0].shape[0] for i in order])
+    vertices = np.vstack([arrays[i][0] for i in order])
+    faces = np.vstack([arrays[i][1] + offsets[j] for j, i in enumerate(order)])
+    surface = surface_from_arrays(vertices, faces)
+    union = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+    assert surface.volume == pytest.approx(union.volume(), rel=1e-12)
+    assert surface.components == len(union.decompose())  # boundary shells, the cavity one of them
+    assert surface.area == pytest.approx(union.surface_area(), rel=1e-12)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_shells_by_vertex_search_are_the_union_of_faces_through_edges(seed):
     """Where every vertex has one fan, _shells_of_one_fan_vertices (a search over the edge
