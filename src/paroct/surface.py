@@ -555,14 +555,15 @@ def _inside_any(parts: list, containers: list) -> set:
     """Indices of parts (manifolds) that lie inside one of containers (manifolds): a bounding
     box within the container's, and no volume left when the container is subtracted."""
     inside = set()
-    boxes = [np.asarray(c.bounding_box()).reshape(2, 3) for c in containers]
+    if not parts or not containers:
+        return inside
+    boxes = np.array([c.bounding_box() for c in containers]).reshape(-1, 2, 3)
     for i, part in enumerate(parts):
         lo, hi = np.asarray(part.bounding_box()).reshape(2, 3)
+        holding = np.flatnonzero(np.all(boxes[:, 0] <= lo, axis=1) & np.all(boxes[:, 1] >= hi, axis=1))
         volume = part.volume()
-        for c, (clo, chi) in zip(containers, boxes):
-            if np.all(lo >= clo) and np.all(hi <= chi) and (part - c).volume() <= 1e-9 * volume:
-                inside.add(i)
-                break
+        if any((part - containers[c]).volume() <= 1e-9 * volume for c in holding):
+            inside.add(i)
     return inside
 
 
