@@ -324,7 +324,7 @@ def test_valid_solids_keep_winding_0_or_1_and_overlapping_shells_do_not():
               + manifold3d.Manifold.cube([4.0, 4.0, 4.0]).translate([8, 8, 8])).translate([5.5, 5.25, 5.125])
     sphere = manifold3d.Manifold.sphere(5.0, 24)
     sv, sf = _manifold_arrays(sphere)
-    # Two spheres sharing their lowest and highest vertex (a pinch, as manifold3d keeps it).
+    # Two spheres sharing one vertex, the lowest of one and the highest of the other (a pinch).
     top = int(np.argmax(sv[:, 2]))
     other = sv - sv[top] + sv[int(np.argmin(sv[:, 2]))]
     ids = np.arange(sv.shape[0]) + sv.shape[0]
