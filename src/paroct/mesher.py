@@ -259,11 +259,9 @@ def mesh(
         # spheres and cylinders at diag/40 (session 33) to size / 8 with a changed genus
         # and 2.6 M tets, where size / 4 keeps the solid with 0.55 M.
         finer = band / 2
-        while any(abs(finer - s) <= 1e-9 * s for s in tried):
+        while finer in tried:  # h / 2, h / 4, ...: halving a float is exact
             finer /= 2
-        finer = max(finer, whole_floor)
-        if any(abs(finer - s) <= 1e-9 * s for s in tried):
-            finer = band
+        finer = max(finer, whole_floor)  # not in tried: those are above whole_floor
         while finer < band * (1 - 1e-9) and not _fits(surface, field, finer, budget):
             finer, memory_bound = finer * 2, True
         if not (thin_features and lost and finer < band * (1 - 1e-9)):
@@ -558,11 +556,6 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=mend)
     stages.done("stuff")
     if mend:
-        # The band's cut-edge table has heads for the band's vertices only (its edges all
-        # lie among them); retarget_warps looks up every vertex of the bad tets' stars.
-        head, upper, chain = cuts.table
-        head = np.concatenate([head, np.full(coords.shape[0] - head.shape[0], -1, dtype=head.dtype)])
-        cuts = dataclasses.replace(cuts, table=(head, upper, chain))
         points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, tets, inside, cuts, targets, points,
                                                           out_tets, offsets)
         report.bad_tets = int(np.count_nonzero((flags & OUTSIDE) != 0))

@@ -187,7 +187,11 @@ def _oriented_edges(lower, upper, coords):
 
 @nb.njit(cache=True, inline="always")
 def _edge_of(head, upper, chain, a, b):
-    """Number of the edge (a, b), a < b, in collect_cut_edges' table, or -1."""
+    """Number of the edge (a, b), a < b, in collect_cut_edges' table, or -1.  A table may
+    cover only the first vertices (a band's: its cut edges all lie among them); a vertex
+    past its head array has no cut edge."""
+    if a >= head.shape[0]:
+        return -1
     s = head[a]
     while s >= 0 and upper[s] != b:
         s = chain[s]
