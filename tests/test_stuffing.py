@@ -597,8 +597,8 @@ def test_retarget_warps_mends_needles_and_keeps_the_bound_first():
             needles = np.nonzero((worst == 0) & (ratio < floor))[0]
             if needles.size == 0:
                 continue
-            new, _ = retarget_warps(x, coords, tets, inside, cuts, targets, np.union1d(np.nonzero(worst)[0], needles), floor,
-                                    offsets=offsets)
+            new = retarget_warps(x, coords, tets, inside, cuts, targets, np.union1d(np.nonzero(worst)[0], needles), floor,
+                                 offsets=offsets).targets
             points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
             mended, mended_ratio = _violations(points, out, coords), _radius_ratios(points, out, coords)
             assert mended.max() <= worst.max() + 1e-9
@@ -608,6 +608,56 @@ def test_retarget_warps_mends_needles_and_keeps_the_bound_first():
             before += needles.size
             after += np.count_nonzero((mended == 0) & (mended_ratio < floor))
     assert before > 100 and after <= before / 6 and pure >= 2  # without the floor: 212 -> 51
+
+
+def test_retarget_warps_names_the_tets_to_stuff_again_and_a_settled_search_moves_nothing_again():
+    """Retargeted.rows are exactly the lattice tets through a vertex whose warp changed (the
+    scan restuff makes without them); searched are the vertices of the bad tets' lattice
+    tets; and after a settled search, searching any of those vertices again from the new
+    warps (points updated in place) moves none, as _mend assumes when it skips that search."""
+    settled = searched_again = 0
+    for seed in range(8):
+        for k in range(10):
+            coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            bad = np.nonzero(_violations(points, out, coords))[0]
+            if bad.size == 0:
+                continue
+            found = retarget_warps(x, coords, tets, inside, cuts, targets, bad, 0.15, offsets=offsets, points=points)
+            changed = found.targets != targets
+            assert found.changed == np.count_nonzero(changed)
+            np.testing.assert_array_equal(found.rows, np.flatnonzero(touching(tets, changed)))
+            owners = np.searchsorted(offsets, bad, side="right") - 1
+            np.testing.assert_array_equal(found.searched, np.unique(tets[owners]))
+            if not found.settled:
+                continue
+            settled += 1
+            rng = np.random.default_rng([seed, k])
+            # Lattice tets of searched vertices only, with stuffed tets to name them by.
+            subset = np.flatnonzero(np.isin(tets, found.searched).all(axis=1) & (np.diff(offsets) > 0))
+            some = rng.choice(subset, min(subset.size, 5), replace=False)
+            again = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets,
+                                   points=points)
+            assert again.changed == 0 and again.rows.size == 0
+            searched_again += 1
+    assert settled > 20 and searched_again == settled
+
+
+def test_a_search_of_one_sweep_settles_only_if_it_moves_nothing(monkeypatch):
+    """With one sweep, the sweep that must move nothing for Retargeted.settled is the one
+    that may have moved vertices: settled exactly when none changed."""
+    monkeypatch.setattr(stuffing, "RETARGET_SWEEPS", 1)
+    outcomes = set()
+    for seed in range(4):
+        for k in range(10):
+            coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            bad = np.nonzero(_violations(points, out, coords))[0]
+            if bad.size:
+                found = retarget_warps(x, coords, tets, inside, cuts, targets, bad, 0.15, offsets=offsets)
+                assert found.settled == (found.changed == 0)
+                outcomes.add(found.settled)
+    assert False in outcomes  # searches that moved vertices were seen
 
 
 def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_worst():
@@ -625,7 +675,8 @@ def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_
             worst = _violations(points, out, coords)
             if not worst.any():
                 continue
-            new, changed = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0], offsets=offsets)
+            found = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0], offsets=offsets)
+            new, changed = found.targets, found.changed
             # Only vertices of the lattice tets that gave bad tets move: each shares a lattice
             # tet with a lattice vertex or cut edge end of a bad tet.
             ids = out[worst > 0].ravel().astype(np.int64)

@@ -740,8 +740,8 @@ def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
 
 def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
             targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *, offsets: np.ndarray,
-            flat_ok: bool = False, points: np.ndarray | None = None,
-            flags: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            flat_ok: bool = False, points: np.ndarray | None = None, flags: np.ndarray | None = None,
+            rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """stuff(..., new_targets), given out, offsets = stuff(..., targets)[1:]: only the lattice
     tets with a vertex whose warp changed are stuffed again; the others' tets move up or down
     in out, in place, and so do their flags (M,) uint8 (any per-tet bytes of the caller's;
@@ -750,7 +750,8 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     fewer), and then new arrays.  (A copy into new arrays, as before, faulted in 63 MB a call
     on fea_part's 2.7 M tets at diag/80, and was the mesh's peak.)  points: stuff's
     points for new_targets if the caller has them (retarget_warps updates stuff's in place),
-    else computed.
+    else computed.  rows: the lattice tets with a vertex whose warp changed, ascending, if the
+    caller has them (Retargeted.rows), else found by a scan of every lattice tet.
 
     Returns (points, tets (M', 4) int32, again, offsets, flags (M',)): the same points, tets
     and offsets as stuff with new_targets; again: the indices (ascending) of the tets stuffed
@@ -766,7 +767,8 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     if points is None:
         points = _warped_points(lattice_points, cuts.points, new_targets)
     signs = _signs(inside, new_targets)
-    rows = np.flatnonzero(touching(tets, new_targets != targets))
+    if rows is None:
+        rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
                                         flat_ok)
     shift = _row_shifts(offsets, rows, again_offsets)
@@ -910,14 +912,17 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
     with 3r/R below min_ratio, the warp (none, or onto the cut point of one of its cut edges)
     that brings the star's worst violation lowest, ties to the largest smallest 3r/R (needles:
     their angles can be good); sweeps until nothing changes.  Changes signs, targets and
-    points in place.
+    points in place.  Returns whether the last sweep moved no vertex (settled).
 
     A vertex whose star's vertices have not moved since it was last visited is skipped: its
-    star scores as then, and the choice it made then (the first best) stays the first best."""
+    star scores as then, and the choice it made then (the first best) stays the first best.
+    So once a sweep moves none, every vertex holds the first best warp for the warps around
+    it, and a search over any of them from there moves none either (Retargeted.settled)."""
     n = vertices.shape[0]
     moved_at = np.zeros(n, dtype=np.int64)  # the move count just after vertices[i] last moved
     visited_at = np.full(n, -1, dtype=np.int64)  # the move count when vertices[i] was last visited
     moves = 0
+    moved = 0
     for _ in range(sweeps):
         moved = 0
         for i in range(n):
@@ -947,6 +952,7 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
                 visited_at[i] = moves
         if moved == 0:
             break
+    return moved == 0
 
 
 @nb.njit(cache=True)
@@ -1041,9 +1047,34 @@ def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain)
 RETARGET_SWEEPS = 4
 
 
+@dataclass(frozen=True)
+class Retargeted:
+    """What retarget_warps found.  targets: (V,) int64 the new warp targets; changed: how many
+    vertices warp elsewhere; rows: (R,) int64 ascending, the lattice tets with such a vertex
+    (restuff's rows); searched: (S,) int64 ascending, the vertices searched (those of the
+    lattice tets that gave the bad tets); settled: whether the search's last sweep moved
+    none of them.  A settled search leaves each searched vertex at the first best warp for
+    the warps around it, so searching any of them again, with no other warp changed, moves
+    none (the caller can skip that search: its result is known)."""
+
+    targets: np.ndarray
+    changed: int
+    rows: np.ndarray
+    searched: np.ndarray
+    settled: bool
+
+
+def bad_tet_vertices(tets: np.ndarray, offsets: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """The vertices (ascending, int64) of the lattice tets (T, 4) that stuffed tets ``bad`` (indices
+    into stuff's output, whose lattice tet t's tets start at offsets[t]) came from: the vertices
+    retarget_warps searches."""
+    owners = np.searchsorted(offsets, bad, side="right") - 1
+    return np.unique(np.take(tets, owners, axis=0).ravel()).astype(np.int64)
+
+
 def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
                    cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0, *,
-                   offsets: np.ndarray, points: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                   offsets: np.ndarray, points: np.ndarray | None = None) -> Retargeted:
     """Mend stuffed tets outside DIHEDRAL_BOUND (and needles: 3r/R below min_ratio) by choosing
     other warps near them.
 
@@ -1058,16 +1089,16 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     stuff's (where each lattice tet's tets start in it); points: stuff's points, if the caller
     has them, which are then updated in place to the new warps (restuff takes them), saving a
     copy of (V + E, 3); else they are computed.
-    Returns (new warp targets (V,), how many vertices warp elsewhere); the caller stuffs again
-    and measures: this is a search, it certifies nothing.
+    Returns a Retargeted (the new warp targets, the lattice tets to stuff again for them:
+    restuff's rows); the caller stuffs again and measures: this is a search, it certifies
+    nothing.
     """
     tets = np.ascontiguousarray(tets)
     new = targets.copy()
     if points is None:
         points = _warped_points(lattice_points, cuts.points, targets)
     signs = _signs(inside, targets)
-    owners = np.searchsorted(offsets, bad, side="right") - 1  # the lattice tet each came from
-    vertices = np.unique(tets[owners].ravel()).astype(np.int64)
+    vertices = bad_tet_vertices(tets, offsets, bad)
     marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
     rows = np.flatnonzero(touching(tets, marked))
@@ -1075,6 +1106,11 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     stars = rows[star_rows]
     # A vertex's options: the cut edges it starts, then those it ends, each in order.
     option_first, options = _star_options(vertices, star_first, stars, tets, cuts.starts, *cuts.table)
-    _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points, inside,
-              coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio), RETARGET_SWEEPS)
-    return new, int(np.count_nonzero(new != targets))
+    settled = _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points,
+                        inside, coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio),
+                        RETARGET_SWEEPS)
+    # Only the searched vertices move; the lattice tets to stuff again are their stars.
+    moved = np.take(new, vertices) != np.take(targets, vertices)
+    in_moved_star = np.repeat(moved, np.diff(star_first))
+    rows_again = np.unique(np.compress(in_moved_star, stars))
+    return Retargeted(new, int(np.count_nonzero(moved)), rows_again, vertices, bool(settled))
