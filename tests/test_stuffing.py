@@ -614,7 +614,8 @@ def test_retarget_warps_names_the_tets_to_stuff_again_and_a_settled_search_moves
     """Retargeted.rows are exactly the lattice tets through a vertex whose warp changed (the
     scan restuff makes without them); searched are the vertices of the bad tets' lattice
     tets; and after a settled search, searching any of those vertices again from the new
-    warps (points updated in place) moves none, as _mend assumes when it skips that search."""
+    warps (points updated in place) moves none, as retarget_warps assumes when it skips that
+    search (settled)."""
     settled = searched_again = 0
     for seed in range(8):
         for k in range(10):
@@ -639,6 +640,10 @@ def test_retarget_warps_names_the_tets_to_stuff_again_and_a_settled_search_moves
             again = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets,
                                    points=points)
             assert again.changed == 0 and again.rows.size == 0
+            skipped = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets,
+                                     points=points, settled=found.searched)  # the search _mend skips
+            assert skipped.changed == 0 and skipped.targets is found.targets
+            np.testing.assert_array_equal(skipped.searched, again.searched)
             searched_again += 1
     assert settled > 20 and searched_again == settled
 

@@ -29,8 +29,8 @@ from .octree import (FaceBuckets, balance, face_buckets, faces_meeting_cells, oc
 from .quality import OUTSIDE, outlier_flags, summarize
 from .repair import remove_pinches
 from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
-from .stuffing import (DIHEDRAL_BOUND, CutEdges, bad_tet_vertices, collect_cut_edges, mixed_rows, restuff,
-                       retarget_warps, stuff, warp_targets)
+from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
+                       stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import SurfaceTopology, used_vertices
 
@@ -861,22 +861,19 @@ def _mend(lattice_points, coords, tets, inside, cuts: CutEdges, targets, points,
           offsets) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Measure the stuffed tets (stuff's points, out_tets, offsets for these lattice tets and
     warp targets) and try other warps near those outside DIHEDRAL_BOUND or needles
-    (retarget_warps), restuffing and measuring again, RETARGET_PASSES times at most.  A pass
-    stops the mending when its search is known to move nothing: the last search settled and
-    every bad tet left comes from lattice tets of vertices it searched (on fea_part at diag/80
-    the third search, 18 ms, found nothing to move).
+    (retarget_warps), restuffing and measuring again, RETARGET_PASSES times at most, or until
+    a search moves nothing; one known to (the last settled and covered every vertex it would
+    search) is skipped: on fea_part at diag/80 the third search, 18 ms, found nothing to move.
     Returns (points, out_tets, targets, offsets, flags (M,) uint8: outlier_flags' verdicts)."""
     flags = _outside_bound(points, out_tets, _core(inside, targets, points.shape[0]))
     last = None
     for _ in range(RETARGET_PASSES):
         if not flags.any():
             break
-        bad = np.flatnonzero(flags != 0)
-        if last is not None and last.settled and np.isin(bad_tet_vertices(tets, offsets, bad), last.searched).all():
-            break  # a search over these vertices would move none (Retargeted.settled)
         # points follow the new warps in place: restuff takes them as they are.
-        last = retarget_warps(lattice_points, coords, tets, inside, cuts, targets, bad, NEEDLE_RATIO, offsets=offsets,
-                              points=points)
+        last = retarget_warps(lattice_points, coords, tets, inside, cuts, targets, np.flatnonzero(flags != 0),
+                              NEEDLE_RATIO, offsets=offsets, points=points,
+                              settled=last.searched if last is not None and last.settled else None)
         if not last.changed:
             break
         # Only the lattice tets around the vertices that warp elsewhere change: stuff and

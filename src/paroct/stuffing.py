@@ -1055,7 +1055,7 @@ class Retargeted:
     lattice tets that gave the bad tets); settled: whether the search's last sweep moved
     none of them.  A settled search leaves each searched vertex at the first best warp for
     the warps around it, so searching any of them again, with no other warp changed, moves
-    none (the caller can skip that search: its result is known)."""
+    none (retarget_warps' settled skips that search)."""
 
     targets: np.ndarray
     changed: int
@@ -1064,7 +1064,7 @@ class Retargeted:
     settled: bool
 
 
-def bad_tet_vertices(tets: np.ndarray, offsets: np.ndarray, bad: np.ndarray) -> np.ndarray:
+def _bad_tet_vertices(tets: np.ndarray, offsets: np.ndarray, bad: np.ndarray) -> np.ndarray:
     """The vertices (ascending, int64) of the lattice tets (T, 4) that stuffed tets ``bad`` (indices
     into stuff's output, whose lattice tet t's tets start at offsets[t]) came from: the vertices
     retarget_warps searches."""
@@ -1074,7 +1074,8 @@ def bad_tet_vertices(tets: np.ndarray, offsets: np.ndarray, bad: np.ndarray) -> 
 
 def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
                    cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0, *,
-                   offsets: np.ndarray, points: np.ndarray | None = None) -> Retargeted:
+                   offsets: np.ndarray, points: np.ndarray | None = None,
+                   settled: np.ndarray | None = None) -> Retargeted:
     """Mend stuffed tets outside DIHEDRAL_BOUND (and needles: 3r/R below min_ratio) by choosing
     other warps near them.
 
@@ -1088,17 +1089,22 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     bad: indices of the bad tets (outside the bound or needles) in stuff's output, offsets:
     stuff's (where each lattice tet's tets start in it); points: stuff's points, if the caller
     has them, which are then updated in place to the new warps (restuff takes them), saving a
-    copy of (V + E, 3); else they are computed.
+    copy of (V + E, 3); else they are computed.  settled: the vertices (ascending) of the
+    caller's last search if it settled and no warp changed since (Retargeted.searched): when
+    every vertex to search is among them, the search is known to move none and is skipped
+    (the result's targets are then targets itself).
     Returns a Retargeted (the new warp targets, the lattice tets to stuff again for them:
     restuff's rows); the caller stuffs again and measures: this is a search, it certifies
     nothing.
     """
     tets = np.ascontiguousarray(tets)
+    vertices = _bad_tet_vertices(tets, offsets, bad)
+    if settled is not None and np.isin(vertices, settled).all():
+        return Retargeted(targets, 0, np.empty(0, dtype=np.int64), vertices, True)
     new = targets.copy()
     if points is None:
         points = _warped_points(lattice_points, cuts.points, targets)
     signs = _signs(inside, targets)
-    vertices = bad_tet_vertices(tets, offsets, bad)
     marked = np.zeros(lattice_points.shape[0], dtype=np.bool_)
     marked[vertices] = True
     rows = np.flatnonzero(touching(tets, marked))
