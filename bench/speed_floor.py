@@ -1,0 +1,108 @@
+"""How far paroct is from a tets/s target against a peer, model by model, and what no pass avoids.
+
+    python bench/speed_floor.py RESULTS.json [...] [--peer tetgen] [--factor 100] [--repeat 7]
+
+RESULTS: bench/compare.py --json output holding paroct's and the peer's rows.  For every
+model and size both meshed, prints:
+- budget: the time paroct may take for ``factor`` x the peer's tets/s with the tets it made,
+  paroct tets / (factor x peer tets/s);
+- needs: paroct's time over the budget, the speed-up the target asks on that model;
+- floor: what every meshing pass pays per surface, whatever the mesh: reading and welding the
+  file (load_surface), the crossings of the seven lattice row directions with the surface
+  and the lattice cells the surface meets, both at the requested size (fastest of
+  ``repeat``, kernels warm).  A model whose floor exceeds its budget cannot reach the target
+  without new algorithms for those passes.
+Last, per size, the median needs and how many models the target's median over the models
+asks to speed up: the median reaches the target when more than half of them do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _fastest(call, repeat: int) -> float:
+    best = np.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        call()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def surface_floor(path: Path, size: float, repeat: int) -> tuple[float, float, float]:
+    """Seconds of (load, seven row directions, surface cells) at size, fastest of repeat."""
+    from paroct import rays
+    from paroct.frame import EDGE_DIRECTIONS, fat_frame
+    from paroct.octree import surface_cells
+    from paroct.surface import load_surface
+
+    load = _fastest(lambda: load_surface(path), repeat)
+    surface = load_surface(path)
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    rows = _fastest(lambda: [rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])],
+                    repeat)
+    cells = _fastest(lambda: surface_cells(frame, snapped, faces, rays.snap_bits(frame), frame.levels), repeat)
+    return load, rows, cells
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("results", nargs="+", help="bench/compare.py --json files")
+    ap.add_argument("--folder", default=str(ROOT.parent / "shared" / "data" / "corpus"))
+    ap.add_argument("--peer", default="tetgen")
+    ap.add_argument("--factor", type=float, default=100.0)
+    ap.add_argument("--repeat", type=int, default=7)
+    args = ap.parse_args(argv)
+    rows = []
+    for name in args.results:
+        try:
+            rows += json.loads(Path(name).read_text())
+        except (OSError, ValueError) as err:
+            print(f"{name}: {err}", file=sys.stderr)
+            return 2
+    ok = {(r["mesher"], r["model"], r["divisions"]): r for r in rows if r["status"] == "ok"}
+    cases = [(m, d) for (mesher, m, d) in ok if mesher == "paroct" and (args.peer, m, d) in ok]
+    if not cases:
+        print(f"no model that paroct and {args.peer} both meshed in {', '.join(args.results)}", file=sys.stderr)
+        return 2
+    sys.path.insert(0, str(ROOT / "bench"))
+    from compare import warm_up_paroct
+
+    warm_up_paroct()
+    print(f"{'size':>5s} {'model':12s} {'paroct ms':>9s} {'budget ms':>9s} {'needs':>6s} {'floor ms':>8s} "
+          f"{'load':>6s} {'7 rows':>6s} {'cells':>6s} {'floor/budget':>12s}")
+    needs = {}
+    for model, div in sorted(cases, key=lambda c: (c[1], c[0])):
+        ours, peer = ok[("paroct", model, div)], ok[(args.peer, model, div)]
+        budget = ours["tets"] / (args.factor * peer["tets_per_s"])
+        path = next(Path(args.folder).glob(f"{model}.*"), None)
+        if path is None:
+            print(f"{model}: not in {args.folder}", file=sys.stderr)
+            return 2
+        load, rays_s, cells = surface_floor(path, ours["size"], args.repeat)
+        floor = load + rays_s + cells
+        needs.setdefault(div, []).append(ours["seconds"] / budget)
+        print(f"/{div:<4g} {model:12s} {1e3 * ours['seconds']:9.1f} {1e3 * budget:9.1f} {needs[div][-1]:6.2f} "
+              f"{1e3 * floor:8.1f} {1e3 * load:6.1f} {1e3 * rays_s:6.1f} {1e3 * cells:6.1f} {floor / budget:12.2f}",
+              flush=True)
+    for div, values in needs.items():
+        half = len(values) // 2 + 1  # more than half of the models
+        print(f"/{div:g}: median needs {statistics.median(values):.2f} x; the {half} cheapest of {len(values)} "
+              f"need up to {sorted(values)[half - 1]:.2f} x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
