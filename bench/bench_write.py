@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import meshio
@@ -19,18 +18,10 @@ import numpy as np
 
 import paroct
 from paroct.io import output_format, write_mesh
+from timing import fastest
 
 ROOT = Path(__file__).resolve().parent.parent
 SUFFIXES = [".vtu", ".inp", ".mesh", ".msh", ".vtk"]
-
-
-def _fastest(write, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        write()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def main(argv=None) -> int:
@@ -51,7 +42,7 @@ def main(argv=None) -> int:
         write_mesh(Path(folder) / "warm.inp", points[:4], tets[:1] * 0)  # compile or load the row kernel
         for suffix in SUFFIXES:
             ours = Path(folder) / f"ours{suffix}"
-            t_ours = _fastest(lambda: write_mesh(ours, points, tets), args.repeat)
+            t_ours = fastest(lambda: write_mesh(ours, points, tets), args.repeat)
             back = meshio.read(ours, file_format=output_format(ours)[0])
             if not (np.array_equal(back.points, points) and np.array_equal(back.cells[0].data, tets)):
                 print(f"{suffix}: read back differs", file=sys.stderr)
@@ -61,7 +52,7 @@ def main(argv=None) -> int:
                 theirs = Path(folder) / f"theirs{suffix}"
                 fmt, options = output_format(theirs)
                 mesh = meshio.Mesh(points, [("tetra", tets.astype(np.int64))])
-                t_theirs = _fastest(lambda: meshio.write(theirs, mesh, file_format=fmt, **options), 1)
+                t_theirs = fastest(lambda: meshio.write(theirs, mesh, file_format=fmt, **options), 1)
                 row += f" {t_theirs:9.3f} {theirs.stat().st_size / 1e6:6.1f}"
             print(row)
     return 0

@@ -22,21 +22,12 @@ import argparse
 import json
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
+from timing import fastest
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _fastest(call, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        call()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def surface_floor(path: Path, size: float, repeat: int) -> tuple[float, float, float]:
@@ -46,14 +37,14 @@ def surface_floor(path: Path, size: float, repeat: int) -> tuple[float, float, f
     from paroct.octree import surface_cells
     from paroct.surface import load_surface
 
-    load = _fastest(lambda: load_surface(path), repeat)
+    load = fastest(lambda: load_surface(path), repeat)
     surface = load_surface(path)
     frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    rows = _fastest(lambda: [rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])],
+    rows = fastest(lambda: [rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])],
                     repeat)
-    cells = _fastest(lambda: surface_cells(frame, snapped, faces, rays.snap_bits(frame), frame.levels), repeat)
+    cells = fastest(lambda: surface_cells(frame, snapped, faces, rays.snap_bits(frame), frame.levels), repeat)
     return load, rows, cells
 
 
