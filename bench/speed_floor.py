@@ -12,8 +12,8 @@ model and size both meshed, prints:
   and the lattice cells the surface meets, both at the requested size (fastest of
   ``repeat``, kernels warm).  A model whose floor exceeds its budget cannot reach the target
   without new algorithms for those passes.
-Last, per size, the median needs and how many models the target's median over the models
-asks to speed up: the median reaches the target when more than half of them do.
+Last, per size, the median of needs and what the models that need least ask when more
+than half of them reach the target (which takes the median over the models there).
 """
 
 from __future__ import annotations
