@@ -68,6 +68,10 @@ def main(argv=None) -> int:
     if not cases:
         print(f"no model that paroct and {args.peer} both meshed in {', '.join(args.results)}", file=sys.stderr)
         return 2
+    missing = sorted({m for m, _ in cases if next(Path(args.folder).glob(f"{m}.*"), None) is None})
+    if missing:
+        print(f"not in {args.folder}: {', '.join(missing)} (--folder: where the models are)", file=sys.stderr)
+        return 2
     sys.path.insert(0, str(ROOT / "bench"))
     from compare import warm_up_paroct
 
@@ -78,10 +82,7 @@ def main(argv=None) -> int:
     for model, div in sorted(cases, key=lambda c: (c[1], c[0])):
         ours, peer = ok[("paroct", model, div)], ok[(args.peer, model, div)]
         budget = ours["tets"] / (args.factor * peer["tets_per_s"])
-        path = next(Path(args.folder).glob(f"{model}.*"), None)
-        if path is None:
-            print(f"{model}: not in {args.folder}", file=sys.stderr)
-            return 2
+        path = next(Path(args.folder).glob(f"{model}.*"))
         load, rays_s, cells = surface_floor(path, ours["size"], args.repeat)
         floor = load + rays_s + cells
         needs.setdefault(div, []).append(ours["seconds"] / budget)
