@@ -9,8 +9,8 @@ import pytest
 
 from paroct import mesh
 from paroct.errors import ParoctError
-from paroct.surface import (_bounding_box, _shell_topology, _shells, _shells_of_one_fan_vertices, _weld, load_surface,
-                            surface_from_arrays)
+from paroct.surface import (_bounding_box, _shell_topology, _shells, _shells_of_one_fan_vertices, _split_touching_sheets,
+                            _weld, load_surface, surface_from_arrays)
 from paroct.topology import edge_multiplicities, link_fans, vertex_links
 
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -172,6 +172,68 @@ def test_sheets_touching_at_a_vertex_are_two_shells_of_genus_zero():
     assert (result.report.boundary_components, result.report.boundary_genus) == (2, 0)
 
 
+def _cubes(*corners, sides=(1.0, 1.0, 1.0)):
+    """manifold3d cubes of the given sides at the given minimum corners, as a list."""
+    return [manifold3d.Manifold.cube(list(sides)).translate(list(c)) for c in corners]
+
+
+def _welded_soup(*solids):
+    """The triangles of the solids as one soup: welding joins their coincident vertices."""
+    parts = [_arrays(s) for s in solids]
+    offsets = np.cumsum([0] + [v.shape[0] for v, _ in parts])
+    return np.vstack([v for v, _ in parts]), np.vstack([f + o for (_, f), o in zip(parts, offsets)])
+
+
+@pytest.mark.parametrize("case", ["two cubes", "two legs under a slab"])
+def test_solids_touching_along_an_edge_are_taken_apart(case):
+    """Welded, the triangles of manifold3d's union of cubes touching along an edge give an edge
+    of four faces; paired around it (the two faces bounding a wedge of solid), every edge has
+    two faces again, the triangles are the same, and the solid is the union."""
+    if case == "two cubes":
+        parts, expected = _cubes((0, 0, 0), (1, 1, 0)), (2, 0)
+    else:  # one shell: the legs touch along an edge under the slab that joins them
+        parts, expected = [*_cubes((0, 0, 0), (1, 1, 0)), *_cubes((0, 0, 1), sides=(2, 2, 1))], (1, 0)
+    union = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+    vertices, faces = _arrays(union)
+    welded, welded_faces, _ = _weld(vertices, faces)
+    assert welded.shape[0] < vertices.shape[0]  # the touching sheets' corners joined
+    count, _, _ = edge_multiplicities(welded_faces, welded.shape[0])
+    assert np.count_nonzero(count == 4) == 1 and np.all((count == 2) | (count == 4))
+    split, split_faces = _split_touching_sheets(welded, welded_faces)
+    count, forward, _ = edge_multiplicities(split_faces, split.shape[0])
+    assert np.all(count == 2) and np.all(forward == 1)
+    assert split.shape[0] == vertices.shape[0] and np.array_equal(split[split_faces], welded[welded_faces])
+    for surface in surface_from_arrays(vertices, faces), load_surface(union):
+        assert (surface.components, surface.genus) == expected
+        assert surface.volume == pytest.approx(union.volume(), rel=1e-12)
+    # As a manifold3d solid it is not welded: the sheets keep their own vertices.
+    assert load_surface(union).vertices.shape[0] == vertices.shape[0]
+    result = mesh((vertices, faces), size=0.1)
+    assert not result.report.warnings
+    assert (result.report.boundary_components, result.report.boundary_genus) == expected
+    assert result.report.mesh_volume == pytest.approx(union.volume(), rel=0.01)
+    assert 10.7 <= result.report.min_dihedral <= result.report.max_dihedral <= 164.8
+
+
+def test_solids_overlapping_at_a_shared_edge_are_refused():
+    """A cube and a prism sharing an edge, each reaching into the other's wedge there: the
+    faces around the edge do not alternate in direction, so no pairing bounds the solid."""
+    prism = manifold3d.Manifold.extrude(manifold3d.CrossSection([[(1.0, 1.0), (0.0, 0.7), (1.3, 0.0)]]), 1.0)
+    vertices, faces = _welded_soup(*_cubes((0, 0, 0)), prism)
+    with pytest.raises(ParoctError, match="non-manifold surface, 1 edges shared by more than two triangles"):
+        surface_from_arrays(vertices, faces)
+
+
+def test_a_manifold_with_vertex_properties_loads_as_its_positions():
+    """Normals split a cube's vertices at its sharp edges; the mesh's merge vectors join them."""
+    cube = manifold3d.Manifold.cube([1.0, 2.0, 3.0]).calculate_normals(0, 60)
+    properties = cube.to_mesh64()
+    assert np.asarray(properties.vert_properties).shape == (24, 6) and len(properties.merge_from_vert) == 16
+    surface = load_surface(cube)
+    assert surface.vertices.shape == (8, 3) and surface.faces.shape == (12, 3)
+    assert (surface.components, surface.genus) == (1, 0) and surface.volume == pytest.approx(6.0, rel=1e-12)
+
+
 def test_corpus_part_loads_as_manifold3d_sees_it():
     surface = load_surface(DATA / "bunny.stl")
     solid = surface.to_manifold()
@@ -292,8 +354,9 @@ def test_bounding_box_is_numpys(seed):
 
 
 def test_fuzzed_surfaces_are_never_accepted_where_manifold3d_refuses_them():
-    """Our checks replace manifold3d's for one-shell surfaces: never more permissive.  (We are
-    stricter on edges in four faces, which manifold3d pairs up and accepts.)"""
+    """Our checks replace manifold3d's for one-shell surfaces: never more permissive.  (Edges
+    in four faces manifold3d pairs up and accepts; we accept them only where the faces
+    alternate in direction around the edge, test_solids_touching_along_an_edge_are_taken_apart.)"""
     accepted = refused = 0
     for seed in range(150):
         rng = np.random.default_rng(seed)

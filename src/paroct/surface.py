@@ -1,7 +1,8 @@
 """Load and validate the closed surface of the solid to mesh.
 
 The triangles are welded and checked here: every edge in exactly two faces of opposite
-orientation, positive enclosed volume.  A surface of one shell (faces joined through
+orientation (sheets that welding joined along an edge taken apart again), positive enclosed
+volume.  A surface of one shell (faces joined through
 edges) is the solid as it is.  When a file holds several shells, manifold3d checks each
 and unions the overlapping ones (shells of negative volume are cavities and are
 subtracted), and everything downstream works on the manifold's triangles.  Either way
@@ -162,6 +163,17 @@ def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarr
     vertices = np.require(vertices, np.float32 if single else np.float64, ["C_CONTIGUOUS", "WRITEABLE"])
     return _weld_kernel(vertices, vertices.view(np.uint32 if single else np.uint64),
                         np.ascontiguousarray(faces, dtype=np.int64))
+
+
+def _used_only(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """_weld without the merge: the vertices faces use, in index order, and the faces with no
+    repeated vertex, renumbered; the flag is False if a used vertex is not finite."""
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
+    used = np.zeros(vertices.shape[0], dtype=bool)
+    used[faces] = True
+    new_id = np.cumsum(used, dtype=np.int64) - 1
+    vertices = np.ascontiguousarray(vertices[used], dtype=np.float64)
+    return vertices, new_id[faces].astype(np.int32), bool(np.isfinite(vertices).all())
 
 
 @nb.njit(cache=True, inline="always")
@@ -414,6 +426,105 @@ def _volume_area(vertices, faces):
     return volume / 6.0, area / 2.0
 
 
+def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The surface with sheets that touch along edges taken apart, or None if some edge
+    cannot be: (vertices (V', 3) float64, faces (F, 3) int32, the same triangles).
+
+    Welding coincident vertices joins solids that touch along an edge (two cubes sharing
+    one, a strut lattice, a CAD assembly's bodies) into edges of 4, 6, ... faces.  Around
+    such an edge the faces of a closed, consistently oriented surface alternate in
+    direction, and each pair of neighbours bounds a wedge of solid or of space.  Pairing the
+    two faces of every solid wedge (about the edge from its smaller vertex lo to its larger
+    hi, a face running hi -> lo with the next face counter-clockwise) gives each edge two
+    faces, and giving every fan of faces around a vertex its own copy of the vertex makes
+    the surface a 2-manifold bounding the same solid: the touching sheets are kept apart, as
+    manifold3d keeps them.  None if an edge has an odd count, two neighbours run it the same
+    way (solids that overlap there), or a face around it is flat (its third vertex on the
+    edge's line, where no angle orders it).
+    """
+    new_vertices, new_faces, ok = _pair_and_split(np.ascontiguousarray(vertices, dtype=np.float64),
+                                                  np.ascontiguousarray(faces, dtype=np.int32))
+    return (new_vertices, new_faces) if ok else None
+
+
+@nb.njit(cache=True)
+def _pair_and_split(vertices, faces):
+    """_split_touching_sheets' kernel: half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k + 1) % 3]
+    and starts at corner h; twins are paired by edge, then corners joined through twins
+    (union-find) become the new vertices, numbered in order of first corner."""
+    nf = faces.shape[0]
+    nv = np.int64(vertices.shape[0])
+    keys = np.empty(3 * nf, dtype=np.int64)
+    for f in range(nf):
+        for k in range(3):
+            p, q = np.int64(faces[f, k]), np.int64(faces[f, (k + 1) % 3])
+            keys[3 * f + k] = min(p, q) * nv + max(p, q)
+    order = np.argsort(keys, kind="mergesort")
+    twin = np.full(3 * nf, -1, dtype=np.int64)
+    angle = np.empty(3 * nf)
+    i = 0
+    while i < 3 * nf:
+        j = i + 1
+        while j < 3 * nf and keys[order[j]] == keys[order[i]]:
+            j += 1
+        n = j - i
+        if n % 2:
+            return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
+        if n == 2:
+            twin[order[i]], twin[order[i + 1]] = order[i + 1], order[i]
+        else:
+            lo, hi = keys[order[i]] // nv, keys[order[i]] % nv
+            d = vertices[hi] - vertices[lo]
+            d = d / np.sqrt(np.sum(d * d))
+            e1 = np.zeros(3)
+            e2 = np.zeros(3)
+            for s in range(i, j):
+                h = order[s]
+                w = vertices[faces[h // 3, (h % 3 + 2) % 3]] - vertices[lo]
+                w = w - np.sum(w * d) * d
+                length = np.sqrt(np.sum(w * w))
+                if not length > 0:
+                    return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
+                if s == i:  # the first face's direction is angle 0
+                    e1 = w / length
+                    e2 = np.array([d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
+                                   d[0] * e1[1] - d[1] * e1[0]])
+                angle[h] = np.arctan2(np.sum(w * e2), np.sum(w * e1))
+            around = order[i:j][np.argsort(angle[order[i:j]], kind="mergesort")]
+            # A face running the edge hi -> lo has the solid just counter-clockwise of it (about
+            # lo -> hi), one running lo -> hi just clockwise: they must alternate.
+            down = faces[around[0] // 3, around[0] % 3] == hi
+            first = 0 if down else 1
+            for s in range(n):
+                if (faces[around[s] // 3, around[s] % 3] == hi) != (down == (s % 2 == 0)):
+                    return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
+            for s in range(first, n, 2):
+                a, b = around[s], around[(s + 1) % n]
+                twin[a], twin[b] = b, a
+        i = j
+    parent = np.arange(3 * nf)
+    for h in range(3 * nf):
+        t = twin[h]
+        if h < t:  # h runs p -> q from corner h; t runs q -> p from corner t
+            union(parent, h, 3 * (t // 3) + (t % 3 + 1) % 3)
+            union(parent, 3 * (h // 3) + (h % 3 + 1) % 3, t)
+    new_id = np.full(3 * nf, -1, dtype=np.int32)
+    new_faces = np.empty((nf, 3), dtype=np.int32)
+    new_vertices = np.empty((3 * nf, 3))
+    m = 0
+    for c in range(3 * nf):
+        r = c
+        while parent[r] != r:
+            r = parent[r]
+        if new_id[r] < 0:
+            new_id[r] = m
+            for i in range(3):  # not a row assignment: its shape check compiles numba's string formatting
+                new_vertices[m, i] = vertices[faces[c // 3, c % 3], i]
+            m += 1
+        new_faces[c // 3, c % 3] = new_id[r]
+    return new_vertices[:m], new_faces, True
+
+
 def _to_manifold(vertices: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
     mesh = manifold3d.Mesh64(
         vert_properties=np.ascontiguousarray(vertices, dtype=np.float64),
@@ -459,8 +570,12 @@ def _check_scale(vertices: np.ndarray, label: str) -> None:
                           f"parts of {MIN_EXTENT:.0e} or more (volumes underflow below): scale the part")
 
 
-def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "surface") -> Surface:
-    """Validate a triangle surface and build its solid; see load_surface."""
+def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "surface", *,
+                        weld: bool = True) -> Surface:
+    """Validate a triangle surface and build its solid; see load_surface.  weld: merge exactly
+    coincident vertices (a triangle soup, as files hold them); False keeps the vertices as
+    numbered, dropping only those no face uses (a manifold3d mesh, whose sheets touching
+    along an edge or at a vertex have vertices of their own)."""
     vertices = np.asarray(vertices)
     if vertices.dtype.kind not in "iuf":
         raise ParoctError(f"{label}: vertices.dtype = {vertices.dtype}, expected real numbers")
@@ -482,13 +597,18 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(
             f"{label}: face indices span {faces.min()}..{faces.max()} but len(vertices) = {vertices.shape[0]}"
         )
-    vertices, faces, finite = _weld(vertices, faces)
+    vertices, faces, finite = _weld(vertices, faces) if weld else _used_only(vertices, faces)
     if not finite:
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
     if faces.shape[0] == 0:
         raise ParoctError(f"{label}: every triangle is degenerate (repeated vertex)")
     _check_scale(vertices, label)
     boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
+    if nonmanifold and not boundary and not flipped:
+        split = _split_touching_sheets(vertices, faces)
+        if split is not None:
+            vertices, faces = split
+            boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
     if boundary or nonmanifold or flipped:
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
     n_shells = int(shell.max()) + 1
@@ -577,8 +697,9 @@ def load_surface(source: SurfaceSource) -> Surface:
     """The validated closed surface of a solid.
 
     source: a path to an STL, OBJ, OFF or PLY file; a ``manifold3d.Manifold``; or a
-    ``(vertices (V, 3), faces (F, 3))`` pair.  Exactly coincident vertices are merged,
-    degenerate triangles dropped, overlapping shells unioned.  Raises ParoctError with
+    ``(vertices (V, 3), faces (F, 3))`` pair.  Exactly coincident vertices of files and
+    arrays are merged (a manifold's are its own), degenerate triangles dropped, solids
+    touching along an edge kept apart, overlapping shells unioned.  Raises ParoctError with
     the reason (open surface with its number of boundary edges, non-manifold edges,
     NaN coordinates, empty, zero or negative volume).
     """
@@ -589,7 +710,14 @@ def load_surface(source: SurfaceSource) -> Surface:
         if source.is_empty():
             raise ParoctError("manifold: empty solid")
         mesh = source.to_mesh64()
-        return surface_from_arrays(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), "manifold")
+        faces = np.asarray(mesh.tri_verts, dtype=np.int64)
+        merge_from = np.asarray(mesh.merge_from_vert, dtype=np.int64)
+        if merge_from.size:  # vertices split only where their properties (normals, UVs) differ
+            to = np.arange(len(mesh.vert_properties))
+            to[merge_from] = np.asarray(mesh.merge_to_vert, dtype=np.int64)
+            faces = to[faces]
+        # Not welded: coincident vertices of sheets that touch are the manifold's to keep apart.
+        return surface_from_arrays(np.asarray(mesh.vert_properties)[:, :3], faces, "manifold", weld=False)
     if isinstance(source, tuple):
         if len(source) != 2:
             raise ParoctError(f"expected a (vertices, faces) pair, got a tuple of {len(source)}")
