@@ -206,13 +206,65 @@ def test_solids_touching_along_an_edge_are_taken_apart(case):
     for surface in surface_from_arrays(vertices, faces), load_surface(union):
         assert (surface.components, surface.genus) == expected
         assert surface.volume == pytest.approx(union.volume(), rel=1e-12)
-    # As a manifold3d solid it is not welded: the sheets keep their own vertices.
-    assert load_surface(union).vertices.shape[0] == vertices.shape[0]
+    assert load_surface(union).vertices.shape[0] == vertices.shape[0]  # each sheet its own vertices again
     result = mesh((vertices, faces), size=0.1)
     assert not result.report.warnings
     assert (result.report.boundary_components, result.report.boundary_genus) == expected
     assert result.report.mesh_volume == pytest.approx(union.volume(), rel=0.01)
     assert 10.7 <= result.report.min_dihedral <= result.report.max_dihedral <= 164.8
+
+
+def test_cubes_touching_along_edges_stay_apart_as_in_the_mesh():
+    """A 3 x 3 x 3 checkerboard of 14 unit cubes, touching along edges and at corners.
+    manifold3d's union joins some through zero-width necks (8 shells, genus -7); no lattice
+    mesh keeps those, so shells that overlap nowhere are kept as they are: 14 cubes of genus
+    0, as a soup and as a manifold, and the mesh has them all."""
+    parts = [manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([i, j, k])
+             for i in range(3) for j in range(3) for k in range(3) if (i + j + k) % 2 == 0]
+    union = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+    assert (len(union.decompose()), union.genus()) == (8, -7)
+    soup = _arrays(union)
+    for surface in surface_from_arrays(*soup), load_surface(union):
+        assert (surface.components, surface.genus) == (14, 0) and surface.volume == pytest.approx(14.0, rel=1e-12)
+    result = mesh(soup, size=0.125)
+    assert not result.report.warnings
+    assert (result.report.boundary_components, result.report.boundary_genus) == (14, 0)
+    assert result.report.mesh_volume == pytest.approx(14.0, rel=0.02)
+
+
+def _menger_sponge(level: int) -> manifold3d.Manifold:
+    """A unit cube with the Menger sponge's square bars removed, ``level`` times over."""
+    bars = []
+
+    def cut(centre, side, left):
+        if left == 0:
+            return
+        third = side / 3
+        for axis in range(3):
+            size, at = [third] * 3, list(centre)
+            size[axis], at[axis] = 3.0, 0.0
+            bars.append(manifold3d.Manifold.cube(size, center=True).translate(at))
+        for offset in np.ndindex(3, 3, 3):
+            step = np.array(offset) - 1
+            if np.abs(step).sum() >= 2:  # the 20 subcubes that stay
+                cut(np.asarray(centre) + third * step, third, left - 1)
+
+    cut((0.0, 0.0, 0.0), 1.0, level)
+    return manifold3d.Manifold.cube([1.0, 1.0, 1.0], center=True) - manifold3d.Manifold.batch_boolean(
+        bars, manifold3d.OpType.Add)
+
+
+def test_a_manifold_whose_touching_edges_have_flat_faces_keeps_its_own_vertices():
+    """manifold3d's level-3 Menger sponge has zero-area triangles at some of its 13 touching
+    edges, where no angle orders the faces: welded as a soup it is refused, as a manifold its
+    own vertices keep the sheets apart (genus 1409)."""
+    sponge = _menger_sponge(3)
+    vertices, faces = _arrays(sponge)
+    with pytest.raises(ParoctError, match="non-manifold surface, 13 edges shared by more than two triangles"):
+        surface_from_arrays(vertices, faces)
+    surface = load_surface(sponge)
+    assert (surface.components, surface.genus) == (1, sponge.genus()) == (1, 1409)
+    assert surface.volume == pytest.approx(sponge.volume(), rel=1e-12) == (20 / 27) ** 3
 
 
 def test_solids_overlapping_at_a_shared_edge_are_refused():

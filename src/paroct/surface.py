@@ -619,7 +619,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         return Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1)
 
     # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
-    solids, cavities = [], []
+    solids, cavities, signed_sum = [], [], 0.0
     by_shell = np.argsort(shell, kind="stable")  # faces[shell == c] for each c would be O(F) a shell
     bounds = np.searchsorted(shell[by_shell], np.arange(n_shells + 1))
     for c in range(n_shells):
@@ -632,6 +632,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         if status.name != "NoError":
             raise _status_error(status.name, label)
         vol = part.volume()
+        signed_sum += vol
         if vol > 0:
             solids.append(part)
         elif vol < 0:
@@ -642,6 +643,13 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     volume = solid.volume()
     if not volume > 0:
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g})")
+    if len(solids) + len(cavities) == n_shells and abs(volume - signed_sum) <= DISJOINT_SHELLS * volume:
+        # No shell overlaps another (the union lost no volume): the shells bound the solid as
+        # they are, and shells that touch stay apart, as they do in the mesh.  manifold3d's union
+        # would join some of them through zero-width necks (a 6 x 6 x 6 checkerboard of cubes
+        # came back as 36 shells of genus 0 for 108 cubes), a topology no mesh keeps.
+        return Surface(vertices, faces, float(volume), float(_volume_area(vertices, faces)[1]),
+                       _genus(fans, faces, n_shells), n_shells)
     out = solid.to_mesh64()
     out_vertices = np.array(out.vert_properties, dtype=np.float64)[:, :3]
     out_faces = np.array(out.tri_verts, dtype=np.int32)
@@ -649,6 +657,12 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     n_shells = int(shell.max()) + 1
     return Surface(out_vertices, out_faces, float(volume), float(solid.surface_area()),
                    _genus(fans, out_faces, n_shells), n_shells)
+
+
+#: Shells whose union's volume is their signed volumes' sum to this relative difference are
+#: taken as overlapping nowhere (touching at most): float sums of the same solid differ by
+#: about 1e-15 relative.
+DISJOINT_SHELLS = 1e-10
 
 
 def _nested_union(solids: list, cavities: list) -> manifold3d.Manifold:
@@ -697,9 +711,9 @@ def load_surface(source: SurfaceSource) -> Surface:
     """The validated closed surface of a solid.
 
     source: a path to an STL, OBJ, OFF or PLY file; a ``manifold3d.Manifold``; or a
-    ``(vertices (V, 3), faces (F, 3))`` pair.  Exactly coincident vertices of files and
-    arrays are merged (a manifold's are its own), degenerate triangles dropped, solids
-    touching along an edge kept apart, overlapping shells unioned.  Raises ParoctError with
+    ``(vertices (V, 3), faces (F, 3))`` pair.  Exactly coincident vertices are merged,
+    degenerate triangles dropped, solids touching along an edge or at a corner kept apart
+    (as the mesh keeps them), overlapping shells unioned.  Raises ParoctError with
     the reason (open surface with its number of boundary edges, non-manifold edges,
     NaN coordinates, empty, zero or negative volume).
     """
@@ -716,8 +730,14 @@ def load_surface(source: SurfaceSource) -> Surface:
             to = np.arange(len(mesh.vert_properties))
             to[merge_from] = np.asarray(mesh.merge_to_vert, dtype=np.int64)
             faces = to[faces]
-        # Not welded: coincident vertices of sheets that touch are the manifold's to keep apart.
-        return surface_from_arrays(np.asarray(mesh.vert_properties)[:, :3], faces, "manifold", weld=False)
+        positions = np.asarray(mesh.vert_properties)[:, :3]
+        try:
+            # Welded like a file, then taken apart at touching edges: touching sheets apart
+            # everywhere, as in the mesh (manifold3d joins some through zero-width necks).
+            return surface_from_arrays(positions, faces, "manifold")
+        except ParoctError:
+            # A touching edge no pairing undoes (flat faces around it): the manifold's own vertices.
+            return surface_from_arrays(positions, faces, "manifold", weld=False)
     if isinstance(source, tuple):
         if len(source) != 2:
             raise ParoctError(f"expected a (vertices, faces) pair, got a tuple of {len(source)}")
