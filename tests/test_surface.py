@@ -232,6 +232,19 @@ def test_cubes_touching_along_edges_stay_apart_as_in_the_mesh():
     assert result.report.mesh_volume == pytest.approx(14.0, rel=0.02)
 
 
+@pytest.mark.parametrize("gap", [0.0, -1e-14, -1e-12])
+def test_cubes_sharing_part_of_a_face_are_united(gap):
+    """Shells that touch over an area, or overlap by a sliver too thin to change the volume's
+    float sum, are one solid: the union lost surface area, so manifold3d's union bounds it."""
+    vertices, faces = _arrays(manifold3d.Manifold.cube([1.0, 1.0, 1.0]))
+    pair = np.vstack([vertices, vertices + [1.0 + gap, 0.3, 0.0]]), np.vstack([faces, faces + len(vertices)])
+    surface = surface_from_arrays(*pair)
+    assert (surface.components, surface.genus) == (1, 0)
+    assert surface.volume == pytest.approx(2.0 + gap, rel=1e-12) and surface.area == pytest.approx(12.0 - 1.4)
+    result = mesh(pair, divisions=40)
+    assert not result.report.warnings and result.report.boundary_components == 1
+
+
 def _menger_sponge(level: int) -> manifold3d.Manifold:
     """A unit cube with the Menger sponge's square bars removed, ``level`` times over."""
     bars = []
