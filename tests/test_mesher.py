@@ -427,6 +427,60 @@ def test_binary_stl_reader_matches_meshio():
     assert np.array_equal(ours.vertices, theirs.vertices) and np.array_equal(ours.faces, theirs.faces)
 
 
+_BOX_CORNERS = "0 0 0\n1 0 0\n1 2 0\n0 2 0\n0 0 3\n1 0 3\n1 2 3\n0 2 3\n"
+_PENTAGON = [(0, 0), (2, 0), (3, 1.5), (1, 3), (-1, 1.5)]  # counter-clockwise, area 7.5
+
+
+@pytest.mark.parametrize("text", [
+    "OFF\n8 6 12\n" + _BOX_CORNERS + "4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n",
+    # counts on the header line, comments, tabs and runs of spaces, colours after faces
+    "OFF 8 6 0 # a box\n# corners\n" + _BOX_CORNERS.replace(" ", "\t") + "\n4  0 3 2 1  255 0 0\n"
+    "4 4 5 6 7 0 255 0\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7  # last\n",
+    # COFF: a colour on every vertex line; a prism of two pentagons (area 7.5) and five quads
+    "COFF\n10 7 0\n" + "".join(f"{x} {y} {z} 1 1 1 1\n" for z in (0, 1) for x, y in _PENTAGON)
+    + "5 4 3 2 1 0\n5 5 6 7 8 9\n" + "".join(f"4 {i} {(i + 1) % 5} {(i + 1) % 5 + 5} {i + 5}\n" for i in range(5)),
+])
+def test_off_files_beyond_meshios_reader(tmp_path, text):
+    """OFF as it is found: quads and polygons (meshio reads triangles only), counts on the
+    header line, comments, tabs, colours: the 1 x 2 x 3 box, or a pentagonal prism."""
+    path = tmp_path / "part.off"
+    path.write_text(text)
+    surface = load_surface(path)
+    volume = 7.5 if text.startswith("COFF") else 6.0
+    assert surface.volume == pytest.approx(volume, rel=1e-12) and (surface.components, surface.genus) == (1, 0)
+
+
+def test_off_fast_path_reads_what_the_line_parser_reads(tmp_path):
+    import meshio
+
+    from paroct.surface import _off_triangles, read_surface_file
+
+    ref = load_surface(DATA / "angle_block.stl")
+    path = tmp_path / "part.off"
+    meshio.write(path, meshio.Mesh(ref.vertices, [("triangle", ref.faces)]))  # a comment after OFF
+    fast = _off_triangles(path.read_text())
+    assert fast is not None
+    slow_path = tmp_path / "slow.off"  # a comment after the counts: the line parser reads it
+    slow_path.write_text(path.read_text() + "# the end\n")
+    assert _off_triangles(slow_path.read_text()) is None
+    slow = read_surface_file(slow_path)
+    assert np.array_equal(fast[0], slow[0]) and np.array_equal(fast[1], slow[1])
+    assert np.array_equal(fast[1], ref.faces)
+
+
+@pytest.mark.parametrize("text,match", [
+    ("OFF\n8 6 0\n" + _BOX_CORNERS + "4 0 3 2 1\n", "the header says 8 vertices and 6 faces, the file holds 8 and 1"),
+    ("OFF\neight six\n", "expected the counts 'vertices faces \\[edges\\]', got 'eight six'"),
+    ("PLY\n", "the first line must be OFF"),
+    ("OFF\n8 1 0\n" + _BOX_CORNERS + "4 0 1 2\n", "a face line reads '4 0 1 2'"),
+])
+def test_malformed_off_files_are_refused_saying_why(tmp_path, text, match):
+    path = tmp_path / "bad.off"
+    path.write_text(text)
+    with pytest.raises(ParoctError, match=match):
+        load_surface(path)
+
+
 def test_quads_are_split_into_triangles(tmp_path):
     import meshio
 

@@ -72,8 +72,9 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) float64 (binary STL: float32, as stored) and triangles (F, 3) int64 of
     a surface file (STL, OBJ, OFF, PLY).
 
-    Quadrilaterals and polygons are split into triangles.  Raises ParoctError for a
-    missing file, an unknown extension or a file meshio cannot parse.
+    Quadrilaterals and polygons are split into triangles.  Binary STL and OFF are read by
+    paroct, the others by meshio.  Raises ParoctError for a missing file, an unknown
+    extension or a file that cannot be parsed.
     """
     import meshio  # only at the edge of the package
 
@@ -85,6 +86,8 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     ext = path.suffix.lower()
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
+    if ext == ".off":  # meshio's OFF reader takes triangles only, and single spaces
+        return _read_off(path)
     try:
         soup = _read_binary_stl(path) if ext == ".stl" else None
         if soup is not None:
@@ -110,6 +113,84 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not tris:
         raise ParoctError(f"{path} holds no triangles")
     return np.asarray(raw.points, dtype=np.float64)[:, :3], np.concatenate(tris)
+
+
+def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) float64 and triangles (F, 3) int64 of an ASCII OFF file: an ``OFF`` header
+    (``COFF``, ``NOFF``, ... too: extra numbers on a vertex line are ignored), the counts
+    ``V F [E]`` (on the header line or the next), V vertex lines and F face lines ``n i_1
+    ... i_n [colour]``, polygons split into fans; ``#`` comments and blank lines anywhere."""
+    def fail(why: str) -> ParoctError:
+        return ParoctError(f"cannot read {path} as OFF: {why}")
+
+    try:
+        text = path.read_bytes().decode("ascii")
+    except UnicodeDecodeError:
+        raise fail("not ASCII text (binary OFF is not read)") from None
+    fast = _off_triangles(text)
+    if fast is not None:
+        return fast
+    lines = [words for words in (line.split("#", 1)[0].split() for line in text.splitlines()) if words]
+    if not lines or not lines[0][0].upper().endswith("OFF"):
+        raise fail("the first line must be OFF (or COFF, NOFF, ...)")
+    counts, start = (lines[0][1:], 1) if len(lines[0]) > 1 else ((lines[1] if len(lines) > 1 else []), 2)
+    try:
+        n_vertices, n_faces = int(counts[0]), int(counts[1])
+    except (IndexError, ValueError):
+        raise fail(f"expected the counts 'vertices faces [edges]', got {' '.join(counts)!r}") from None
+    vertex_lines = lines[start:start + n_vertices]
+    face_lines = lines[start + n_vertices:start + n_vertices + n_faces]
+    if len(vertex_lines) < n_vertices or len(face_lines) < n_faces:
+        raise fail(f"the header says {n_vertices} vertices and {n_faces} faces, the file holds "
+                   f"{len(vertex_lines)} and {len(face_lines)} (truncated?)")
+    try:
+        vertices = np.array([words[:3] for words in vertex_lines], dtype=np.float64)
+        tris = []
+        for words in face_lines:
+            n = int(words[0])
+            if n < 3 or len(words) < n + 1:
+                raise fail(f"a face line reads {' '.join(words)!r}: expected n >= 3 and n indices")
+            ids = [int(w) for w in words[1:n + 1]]
+            tris.extend((ids[0], ids[k], ids[k + 1]) for k in range(1, n - 1))
+    except ValueError as exc:
+        raise fail(str(exc)) from None
+    if vertices.shape != (n_vertices, 3):
+        raise fail("a vertex line has fewer than 3 coordinates")
+    if not tris:
+        raise ParoctError(f"{path} holds no triangles")
+    return vertices, np.asarray(tris, dtype=np.int64)
+
+
+def _off_triangles(text: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """_read_off's result for the common file, or None: the header ``OFF`` alone on its line,
+    the counts on the next (comments and blank lines between), then no comment, 3
+    coordinates a vertex and triangles ``3 a b c``.  The tokens are converted by numpy at
+    once (a line-by-line parse took 0.33 s of armadillo's 86 k triangles)."""
+    header, pos = [], 0
+    while len(header) < 2 and pos < len(text):
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end
+        words = text[pos:end].split("#", 1)[0].split()
+        pos = end + 1
+        if words:
+            header.append(words)
+    if len(header) < 2 or header[0] != ["OFF"] or "#" in text[pos:]:
+        return None
+    counts = header[1]
+    if len(counts) not in (2, 3) or not all(c.isdigit() for c in counts):
+        return None
+    n_vertices, n_faces = int(counts[0]), int(counts[1])
+    tokens = text[pos:].split()
+    if len(tokens) != 3 * n_vertices + 4 * n_faces:
+        return None
+    try:
+        vertices = np.array(tokens[:3 * n_vertices], dtype=np.float64).reshape(n_vertices, 3)
+        faces = np.array(tokens[3 * n_vertices:], dtype=np.int64).reshape(n_faces, 4)
+    except ValueError:
+        return None
+    if n_faces == 0 or not np.all(faces[:, 0] == 3):
+        return None
+    return vertices, np.ascontiguousarray(faces[:, 1:])
 
 
 #: A binary STL facet: normal, three corners (float32) and an attribute word, 50 bytes.
