@@ -542,3 +542,43 @@ def first_winding_outside(keys: np.ndarray, fracs: np.ndarray, signs: np.ndarray
                 found.append(run[0])
                 break
     return min(found, default=-1)
+
+
+def surface_patches(vertices: np.ndarray, faces: np.ndarray, feature_angle: float) -> np.ndarray:
+    """Patch id (F,) from 1 of each triangle by a breadth-first search over an edge dict: across
+    an edge when both unit normals exist and turn by less than feature_angle degrees, or when
+    one triangle has zero area and the edge is its longest; numbered by first triangle."""
+    normals, longest = [], []
+    for f in np.asarray(faces).tolist():
+        a, b, c = (np.asarray(vertices[i], dtype=float) for i in f)
+        n = np.cross(b - a, c - a)
+        length = float(np.linalg.norm(n))
+        normals.append(n / length if length > 0 else None)
+        lengths = [float(np.sum((np.asarray(vertices[f[(j + 1) % 3]]) - np.asarray(vertices[f[j]])) ** 2)) for j in range(3)]
+        longest.append(int(np.argmax(lengths)))
+    by_edge: dict = {}
+    for i, f in enumerate(np.asarray(faces).tolist()):
+        for j in range(3):
+            by_edge.setdefault(frozenset((f[j], f[(j + 1) % 3])), []).append((i, j))
+    neighbours: list = [[] for _ in range(len(faces))]
+    for pair in by_edge.values():
+        (f, j), (g, i) = pair
+        smooth = (normals[f] is not None and normals[g] is not None
+                  and math.degrees(math.acos(max(-1.0, min(1.0, float(normals[f] @ normals[g]))))) < feature_angle)
+        if smooth or (normals[f] is None and longest[f] == j) or (normals[g] is None and longest[g] == i):
+            neighbours[f].append(g)
+            neighbours[g].append(f)
+    labels = np.zeros(len(faces), dtype=np.int32)
+    count = 0
+    for start in range(len(faces)):
+        if labels[start]:
+            continue
+        count += 1
+        labels[start] = count
+        todo = [start]
+        while todo:
+            for g in neighbours[todo.pop()]:
+                if not labels[g]:
+                    labels[g] = count
+                    todo.append(g)
+    return labels

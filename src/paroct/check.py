@@ -122,7 +122,9 @@ def _bin_triangles(vertices, faces, origin, cell, dims):
 
 
 @nb.njit(cache=True, inline="always")
-def _scan_cell(px, py, pz, c, start, items, vertices, faces, best):
+def _scan_cell(px, py, pz, c, start, items, vertices, faces, best, nearest):
+    """(squared distance, triangle) of the nearest of cell c's triangles and (best, nearest),
+    the earlier one on a tie."""
     for s in range(start[c], start[c + 1]):
         f = items[s]
         a = faces[f, 0]
@@ -131,14 +133,16 @@ def _scan_cell(px, py, pz, c, start, items, vertices, faces, best):
         d = _point_triangle_sq(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
                                vertices[b, 0], vertices[b, 1], vertices[b, 2],
                                vertices[e, 0], vertices[e, 1], vertices[e, 2])
-        if d < best:
+        if d < best or (d == best and f < nearest):
             best = d
-    return best
+            nearest = f
+    return best, nearest
 
 
 @nb.njit(cache=True, parallel=True)
-def _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out):
-    """Distance from each query (inside the grid box) to the nearest triangle, by growing cube shells.
+def _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out, out_face):
+    """Distance from each query (inside the grid box) to the nearest triangle (out), and that
+    triangle (out_face: the smallest id among equally near ones), by growing cube shells.
 
     After the shell at Chebyshev radius r around the query's cell, every triangle not yet
     seen lies outside the box of cells within r, so at least as far as that box's nearest
@@ -150,6 +154,7 @@ def _nearest_distances(queries, vertices, faces, origin, cell, dims, start, item
         cj = min(dims[1] - 1, max(0, np.int64(math.floor((py - origin[1]) / cell))))
         ck = min(dims[2] - 1, max(0, np.int64(math.floor((pz - origin[2]) / cell))))
         best = np.inf
+        nearest = faces.shape[0]
         r = 0
         while True:
             i0, i1 = max(ci - r, 0), min(ci + r, dims[0] - 1)
@@ -160,12 +165,15 @@ def _nearest_distances(queries, vertices, faces, origin, cell, dims, start, item
                     base = (i * dims[1] + j) * dims[2]
                     if abs(i - ci) == r or abs(j - cj) == r:
                         for k in range(k0, k1 + 1):
-                            best = _scan_cell(px, py, pz, base + k, start, items, vertices, faces, best)
+                            best, nearest = _scan_cell(px, py, pz, base + k, start, items, vertices, faces, best,
+                                                       nearest)
                     else:
                         if ck - r >= 0:
-                            best = _scan_cell(px, py, pz, base + ck - r, start, items, vertices, faces, best)
+                            best, nearest = _scan_cell(px, py, pz, base + ck - r, start, items, vertices, faces,
+                                                       best, nearest)
                         if r > 0 and ck + r < dims[2]:
-                            best = _scan_cell(px, py, pz, base + ck + r, start, items, vertices, faces, best)
+                            best, nearest = _scan_cell(px, py, pz, base + ck + r, start, items, vertices, faces,
+                                                       best, nearest)
             # Distance from the query to the unexplored part of the grid.
             gap = np.inf
             if i0 > 0:
@@ -180,10 +188,11 @@ def _nearest_distances(queries, vertices, faces, origin, cell, dims, start, item
                 gap = min(gap, pz - (origin[2] + k0 * cell))
             if k1 < dims[2] - 1:
                 gap = min(gap, origin[2] + (k1 + 1) * cell - pz)
-            if gap == np.inf or best <= gap * gap:
+            if gap == np.inf or best < gap * gap:  # strictly: a triangle as near beyond may have a smaller id
                 break
             r += 1
         out[q] = math.sqrt(best)
+        out_face[q] = nearest
 
 
 def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -193,14 +202,21 @@ def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.
     triangles and the queries (about one triangle per cell, at most 256 cells per axis)
     limits the triangles measured per query.
     """
+    return nearest_triangles(queries, vertices, faces)[0]
+
+
+def nearest_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """distances_to_triangles' distances (Q,) float64, and the nearest triangle of each query
+    (Q,) int64, the smallest index among equally near ones (so the same for any grid)."""
     queries = np.ascontiguousarray(queries, dtype=np.float64)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     if faces.shape[0] == 0:
         raise ValueError("no triangles to measure the distance to")
     out = np.empty(queries.shape[0])
+    out_face = np.empty(queries.shape[0], dtype=np.int64)
     if queries.shape[0] == 0:
-        return out
+        return out, out_face
     used = vertices[np.unique(faces)]
     lo = np.minimum(used.min(axis=0), queries.min(axis=0))
     hi = np.maximum(used.max(axis=0), queries.max(axis=0))
@@ -214,8 +230,8 @@ def distances_to_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.
     origin = lo - 0.5 * cell
     dims = np.maximum(1, np.ceil((extent + cell) / cell).astype(np.int64))
     start, items = _bin_triangles(vertices, faces, origin, cell, dims)
-    _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out)
-    return out
+    _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out, out_face)
+    return out, out_face
 
 
 @nb.njit(cache=True, parallel=True)

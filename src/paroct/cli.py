@@ -14,7 +14,10 @@ import warnings
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from . import __version__
+from .boundary import DEFAULT_FEATURE_ANGLE
 from .errors import ParoctError
 
 EXIT_OK = 0
@@ -72,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="long edge at most H in the box [X0,X1]x[Y0,Y1]x[Z0,Z1] (repeatable)")
     m.add_argument("--refine-sphere", type=float, nargs=5, action="append", default=[],
                    metavar=("X", "Y", "Z", "R", "H"), help="long edge at most H within R of (X, Y, Z) (repeatable)")
+    m.add_argument("--patches", type=float, nargs="?", const=DEFAULT_FEATURE_ANGLE, metavar="ANGLE",
+                   help="also write the boundary triangles, tagged by surface patch: the surface split at edges "
+                        f"sharper than ANGLE degrees (default {DEFAULT_FEATURE_ANGLE:g}); Gmsh physical groups in .msh, "
+                        "surfaces and node sets in .inp, references in .mesh, cell data boundary_patch elsewhere")
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
     talk = m.add_mutually_exclusive_group()
@@ -149,8 +156,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
     result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
                   thin_features=not args.keep_size, min_size=args.min_size,
                   max_memory=max_memory, progress=progress if args.verbose else None)
+    boundary = None if args.patches is None else result.boundary_patches(args.patches)
     t1 = time.perf_counter()
-    write_mesh(out, result.mesh.points, result.mesh.tets)
+    write_mesh(out, result.mesh.points, result.mesh.tets, boundary=boundary)
     t2 = time.perf_counter()
     peak = peak_resident() if memory_start is not None else None
     report = result.report
@@ -159,18 +167,19 @@ def _run_mesh(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(format_mesh_summary(report, out, mesh_seconds=t1 - t0, write_seconds=t2 - t1, verbose=args.verbose,
                                   load_seconds=t_loaded - t0,
-                                  peak_bytes=None if peak is None else max(peak - memory_start, 0)))
+                                  peak_bytes=None if peak is None else max(peak - memory_start, 0), boundary=boundary))
     return EXIT_OK
 
 
 def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seconds: float, verbose: bool = False,
-                        load_seconds: float | None = None, peak_bytes: int | None = None) -> str:
+                        load_seconds: float | None = None, peak_bytes: int | None = None, boundary=None) -> str:
     """Printable summary of a mesher.MeshReport: counts, quality, volume, topology, times (seconds).
 
     load_seconds: time spent loading the surface before mesh() was called, added to the
     report's "load" stage (which only times what mesh() itself did).  peak_bytes: peak
     resident memory of loading, meshing and writing above the process's before (verbose
-    only; None: not measured)."""
+    only; None: not measured).  boundary: the BoundaryPatches written, if any (their
+    time counts as meshing)."""
     err = report.volume_error
     err_text = "n/a" if math.isnan(err) else f"{100 * err:+.2f}%"
     lines = [
@@ -183,6 +192,10 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
         f"{'' if report.boundary_manifold else ', NOT manifold'}; "
         f"input {report.input_components} components, genus {report.input_genus}",
     ]
+    if boundary is not None:
+        empty = boundary.n_patches - np.unique(boundary.patches).size
+        lines.append(f"boundary {len(boundary.faces)} triangles in {boundary.n_patches} patches (feature angle "
+                     f"{boundary.feature_angle:g} deg){f', {empty} of them too small for the size' if empty else ''}")
     lines += [f"note: {note}" for note in report.notes]
     if verbose:
         lines.append(f"unresolved cuts {report.unresolved_cuts}, repaired tets {report.repaired_tets}, "

@@ -15,6 +15,7 @@ import numba as nb
 import numpy as np
 
 from . import rays
+from .boundary import DEFAULT_FEATURE_ANGLE, BoundaryPatches, boundary_patches
 from .check import far_from_points
 from .errors import ParoctError
 from .features import ThinFeatures
@@ -106,8 +107,21 @@ class MeshReport:
 
 @dataclass(frozen=True)
 class MeshResult:
+    """What mesh() returns: the mesh, the report, and the surface it fills (None when built
+    by hand), which boundary_patches tags the mesh's boundary by."""
+
     mesh: TetMesh
     report: MeshReport
+    surface: Surface | None = field(default=None, repr=False, compare=False)
+
+    def boundary_patches(self, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> BoundaryPatches:
+        """The mesh's boundary triangles, each tagged with the patch of the surface it lies
+        on: the surface split at edges sharper than ``feature_angle`` degrees
+        (boundary.boundary_patches)."""
+        if self.surface is None:
+            raise ParoctError("this result has no surface to take the patches from; call "
+                              "paroct.boundary_patches(points, tets, surface) instead")
+        return boundary_patches(self.mesh.points, self.mesh.tets, self.surface, feature_angle)
 
 
 def estimate_tets(surface: Surface, field: SizeField) -> int:
@@ -636,7 +650,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
             f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
-    return MeshResult(mesh, report)
+    return MeshResult(mesh, report, surface)
 
 
 #: A surface vertex with no mesh boundary vertex within this many times the band's longest

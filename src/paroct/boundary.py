@@ -1,0 +1,149 @@
+"""Boundary patches: the solid's surface split at its sharp edges, and the mesh's boundary
+triangles tagged with the patch they lie on, so that boundary conditions can be put on them
+(Gmsh physical groups, Abaqus surfaces and node sets, Medit references: see io.write_mesh).
+
+A patch is a set of surface triangles joined across edges where the surface turns by less
+than the feature angle (the angle between the two triangles' normals), the usual rule of CAD
+and of Gmsh's ``ClassifySurfaces``: a box has 6 patches, a cylinder 3 at 40 degrees.  Each
+boundary triangle of the mesh takes the patch of the input triangle nearest its centroid
+(exact point-to-triangle distances, check.nearest_triangles).  Stuffing cuts sharp edges
+(by less than one size), so the tagged faces along a sharp edge split between its two
+patches where the cut falls, not on the edge itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .check import nearest_triangles
+from .errors import ParoctError
+from .features import face_normals
+from .surface import Surface
+from .topology import TET_FACES, match_faces, union
+
+#: Default feature angle, degrees: edges where the surface turns by more bound patches.
+DEFAULT_FEATURE_ANGLE = 40.0
+
+
+@dataclass(frozen=True)
+class BoundaryPatches:
+    """The boundary triangles of a tet mesh, tagged by surface patch.
+
+    faces: (B, 3) int32 vertex ids into the mesh's points, counter-clockwise seen from
+    outside; tets: (B,) int64 the tet each triangle bounds; tet_faces: (B,) int8 which face
+    of that tet it is (k: the face opposite the tet's vertex k); patches: (B,) int32 the
+    patch of each triangle, 1 .. n_patches (from 1, as files number them: Gmsh's physical
+    tags must be positive); n_patches: the surface's patch count (a patch too small for the
+    lattice may have no triangle); feature_angle: degrees.
+    """
+
+    faces: np.ndarray
+    tets: np.ndarray
+    tet_faces: np.ndarray
+    patches: np.ndarray
+    n_patches: int
+    feature_angle: float
+
+    def __post_init__(self):
+        b = self.faces.shape[0]
+        if self.faces.shape != (b, 3) or any(a.shape != (b,) for a in (self.tets, self.tet_faces, self.patches)):
+            raise ValueError(f"faces.shape = {self.faces.shape}, tets.shape = {self.tets.shape}, tet_faces.shape = "
+                             f"{self.tet_faces.shape}, patches.shape = {self.patches.shape}; want (B, 3) and (B,)")
+        if b and (self.patches.min() < 1 or self.patches.max() > self.n_patches):
+            raise ValueError(f"patches span {self.patches.min()} .. {self.patches.max()}, n_patches = {self.n_patches}")
+
+
+def surface_patches(surface: Surface, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> np.ndarray:
+    """Patch id (F,) int32 of each of the surface's triangles: triangles joined across every
+    edge where their unit normals differ by less than ``feature_angle`` degrees (0 < angle <=
+    180), numbered 1, 2, ... in the order of each patch's first triangle.  A triangle of zero
+    area has no normal: it joins the patch across its longest edge."""
+    if not (isinstance(feature_angle, (int, float, np.floating)) and 0 < feature_angle <= 180):
+        raise ParoctError(f"feature angle = {feature_angle}: must be a number of degrees in (0, 180]")
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
+    return _patches(vertices, faces, face_normals(vertices, faces), math.cos(math.radians(feature_angle)))
+
+
+@nb.njit(cache=True)
+def _patches(vertices, faces, normals, min_cos):
+    """surface_patches' kernel over unit normals (F, 3) (zero for zero-area faces): every edge
+    a -> b of a face matched with its twin b -> a (a counting sort of the edges by smaller
+    vertex; a closed oriented surface has exactly one), union-find over the smooth ones, then
+    labels by first face."""
+    nf = faces.shape[0]
+    nv = vertices.shape[0]
+    longest = np.zeros(nf, dtype=np.int64)  # the face's longest edge j, from corner j to j + 1
+    for f in range(nf):
+        best = -1.0
+        for j in range(3):
+            p, q = faces[f, j], faces[f, (j + 1) % 3]
+            d = 0.0
+            for k in range(3):
+                d += (vertices[q, k] - vertices[p, k]) ** 2
+            if d > best:
+                best, longest[f] = d, j
+    start = np.zeros(nv + 1, dtype=np.int64)
+    for f in range(nf):
+        for j in range(3):
+            start[min(faces[f, j], faces[f, (j + 1) % 3]) + 1] += 1
+    for v in range(nv):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    slot = np.empty(3 * nf, dtype=np.int64)  # face * 3 + j of each edge occurrence
+    for f in range(nf):
+        for j in range(3):
+            a = min(faces[f, j], faces[f, (j + 1) % 3])
+            slot[fill[a]] = 3 * f + j
+            fill[a] += 1
+    parent = np.arange(nf)
+    for a in range(nv):
+        for s in range(start[a], start[a + 1]):
+            f, j = slot[s] // 3, slot[s] % 3
+            p, q = faces[f, j], faces[f, (j + 1) % 3]
+            for t in range(start[a], start[a + 1]):  # the twin q -> p
+                g, i = slot[t] // 3, slot[t] % 3
+                if g <= f or faces[g, i] != q or faces[g, (i + 1) % 3] != p:
+                    continue
+                dot = normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1] + normals[f, 2] * normals[g, 2]
+                flat_f = normals[f, 0] == 0 and normals[f, 1] == 0 and normals[f, 2] == 0
+                flat_g = normals[g, 0] == 0 and normals[g, 1] == 0 and normals[g, 2] == 0
+                if (not flat_f and not flat_g and dot > min_cos) or (flat_f and longest[f] == j) \
+                        or (flat_g and longest[g] == i):
+                    union(parent, f, g)
+    labels = np.zeros(nf, dtype=np.int32)
+    n_patches = 0
+    for f in range(nf):
+        r = f
+        while parent[r] != r:
+            r = parent[r]
+        if labels[r] == 0:
+            n_patches += 1
+            labels[r] = n_patches
+        labels[f] = labels[r]
+    return labels
+
+
+def boundary_patches(points: np.ndarray, tets: np.ndarray, surface: Surface,
+                     feature_angle: float = DEFAULT_FEATURE_ANGLE) -> BoundaryPatches:
+    """The boundary triangles of the tet mesh (points (N, 3) float64, tets (M, 4) positively
+    oriented) tagged with the patches (surface_patches) of the surface it fills: each takes
+    the patch of the surface triangle nearest its centroid."""
+    labels = surface_patches(surface, feature_angle)
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    neighbour = match_faces(tets)[0]
+    owner, face = np.nonzero(neighbour < 0)
+    faces = tets[owner[:, None], TET_FACES[face]]
+    points = np.asarray(points, dtype=np.float64)
+    if faces.shape[0]:
+        centroids = (points[faces[:, 0]] + points[faces[:, 1]] + points[faces[:, 2]]) / 3
+        nearest = nearest_triangles(centroids, surface.vertices, surface.faces)[1]
+        patches = labels[nearest]
+    else:
+        patches = np.zeros(0, dtype=np.int32)
+    return BoundaryPatches(faces.astype(np.int32), owner.astype(np.int64), face.astype(np.int8),
+                           patches.astype(np.int32), int(labels.max(initial=0)), float(feature_angle))
