@@ -6,6 +6,8 @@ import manifold3d
 import numpy as np
 import pytest
 
+import paroct
+
 from paroct import rays
 from paroct.check import distances_to_triangles
 from paroct.errors import ParoctError
@@ -384,8 +386,49 @@ def test_size_checks():
             mesh(box, size=bad)
     with pytest.raises(ParoctError, match="GiB"):
         mesh(box, size=1e-4)  # ~1.2e13 tets: refused before any work
-    with pytest.raises(ParoctError, match="GiB"):
+    with pytest.raises(ParoctError, match=r"27.7 MiB, more than the 1000 bytes allowed"):
         mesh(box, size=0.05, max_memory=1000)
+
+
+@pytest.mark.parametrize("options, match", [
+    (dict(divisions="12"), r"divisions = '12': must be a positive number"),
+    (dict(divisions=[12]), r"divisions = \[12\]: must be a positive number"),
+    (dict(size=True), r"size = True: must be a positive number"),
+    (dict(size=1e-300), r"size = 1e-300 is too small for the part: its bounding-box diagonal 1.73205 is more than 2\^"),
+    (dict(size=5e-324), r"size = 4.94066e-324 is too small for the part"),
+    (dict(size=1e308), r"size = 1e\+308 is larger than the whole part \(its bounding-box diagonal is 1.73205\)"),
+    (dict(divisions=1e308), r"is too small for the part"),
+    (dict(divisions=12, max_size="10"), r"max_size = '10': must be a positive number"),
+    (dict(divisions=12, min_size="abc"), r"min_size = 'abc': must be a positive number"),
+    (dict(divisions=12, max_memory=float("nan")), r"max_memory = nan: must be a positive number"),
+    (dict(divisions=12, max_memory=-1), r"max_memory = -1: must be a positive number"),
+    (dict(divisions=12, regions=None), r"regions = None: must be a list of paroct.Box and paroct.Sphere"),
+    (dict(divisions=12, regions=paroct.Box((0, 0, 0), (1, 1, 1), 1)), r"must be a list of paroct.Box"),
+    (dict(divisions=12, regions=[paroct.Box((0, 0), (1, 1), 1)]), r"refinement box lo = \(0, 0\): must be three finite"),
+    (dict(divisions=12, regions=[paroct.Box(("a", 0, 0), (1, 1, 1), 1)]), r"refinement box lo = \('a', 0, 0\)"),
+    (dict(divisions=12, regions=[paroct.Box((0, 0, 0), (1, 1, 1), None)]), r"refinement region size = None"),
+    (dict(divisions=12, regions=[paroct.Sphere((0, 0, 0), "1", 1)]), r"refinement sphere radius = '1'"),
+    (dict(divisions=12, regions=[paroct.Sphere((np.nan, 0, 0), 1, 1)]), r"refinement sphere center = \(nan, 0, 0\)"),
+    (dict(divisions=12, progress=1), r"progress = 1: must be a function"),
+])
+def test_options_of_the_wrong_kind_are_refused_by_name(options, match):
+    """Every option is checked before any work, and a wrong one named in a ParoctError (not a
+    TypeError from deep inside, nor a mesh of something else)."""
+    with pytest.raises(ParoctError, match=match):
+        mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), **options)
+
+
+def test_numpy_numbers_and_unbounded_memory_are_accepted():
+    box = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    ref = mesh(box, size=0.25)
+    for options in (dict(size=np.float32(0.25)), dict(divisions=np.int64(4) * np.sqrt(3)), dict(size=0.25, max_memory=np.inf)):
+        assert mesh(box, **options).mesh.tets.shape == ref.mesh.tets.shape
+
+
+def test_a_region_asking_below_size_is_noted():
+    box = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    report = mesh(box, size=0.2, regions=[paroct.Sphere((0.5, 0.5, 0.5), 0.2, 0.05)]).report
+    assert any("refinement sphere asks for size 0.05, below size = 0.2" in note for note in report.notes)
 
 
 def test_prism_table_tets_are_valid_for_a_convex_prism():
@@ -453,7 +496,7 @@ def test_off_files_beyond_meshios_reader(tmp_path, text):
 def test_off_fast_path_reads_what_the_line_parser_reads(tmp_path):
     import meshio
 
-    from paroct.surface import _off_triangles, read_surface_file
+    from paroct.readers import _off_triangles, read_surface_file
 
     ref = load_surface(DATA / "angle_block.stl")
     path = tmp_path / "part.off"

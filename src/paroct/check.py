@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
-from .quality import tet_quality
+from .quality import tet_quality, unit_scaled
 from .surface import Surface
 from .topology import boundary_faces, match_faces, surface_topology
 
@@ -473,6 +473,9 @@ def check_mesh(
     indices out of range, NaN coordinates on tet vertices).
     """
     points, tets = _validate(points, tets)
+    # Measured at a power-of-two scale (exact) that keeps squared areas of parts 1e-100 or
+    # 1e100 across in range; volumes are scaled back.
+    points, scale = unit_scaled(points)
     n = points.shape[0]
     m = tets.shape[0]
     q = tet_quality(points, tets)
@@ -489,7 +492,7 @@ def check_mesh(
         min_dihedral=float("nan") if empty else float(q.min_dihedral.min()),
         max_dihedral=float("nan") if empty else float(q.max_dihedral.max()),
         min_radius_ratio=float("nan") if empty else float(q.radius_ratio.min()),
-        volume=float(q.volume.sum()),
+        volume=float(np.sum(q.volume)) / scale / scale / scale,
         overloaded_faces=int(overloaded),
         same_side_faces=int(same_side),
         boundary_faces=int(faces.shape[0]),
@@ -499,29 +502,31 @@ def check_mesh(
         boundary_genus=int(topo.genus),
     )
     if surface is not None:
-        fields.update(_surface_fields(points, faces, surface, samples_per_triangle, seed))
+        fields.update(_surface_fields(points, faces, surface, scale, samples_per_triangle, seed))
     return CheckReport(**fields)
 
 
-def _surface_fields(points, faces, surface: Surface, per_triangle: int, seed: int) -> dict:
-    """Solid volume and the two directed Hausdorff distances (relative to the diagonal)."""
+def _surface_fields(points, faces, surface: Surface, scale: float, per_triangle: int, seed: int) -> dict:
+    """Solid volume and the two directed Hausdorff distances (relative to the diagonal);
+    points are the mesh's scaled by ``scale``, the surface is scaled alike."""
     out = dict(solid_volume=float(surface.volume), surface_components=int(surface.components),
                surface_genus=int(surface.genus))
-    diagonal = surface.diagonal
+    diagonal = surface.diagonal * scale
     surface_faces = np.asarray(surface.faces, dtype=np.int64)
+    vertices = surface.vertices * scale if scale != 1.0 else surface.vertices
     if faces.shape[0] == 0:  # no boundary to compare: the whole surface is missed
         far = np.inf
         out.update(hausdorff_to_surface=far, hausdorff_to_mesh=far,
                    hausdorff_at=tuple(float(c) for c in surface.vertices[0]))
         return out
     on_mesh = sample_triangles(points, faces, per_triangle, seed)
-    on_surface = sample_triangles(surface.vertices, surface_faces, per_triangle, seed)
-    to_surface = distances_to_triangles(on_mesh, surface.vertices, surface_faces)
+    on_surface = sample_triangles(vertices, surface_faces, per_triangle, seed)
+    to_surface = distances_to_triangles(on_mesh, vertices, surface_faces)
     to_mesh = distances_to_triangles(on_surface, points, faces)
     i, j = int(np.argmax(to_surface)), int(np.argmax(to_mesh))
     at = on_mesh[i] if to_surface[i] >= to_mesh[j] else on_surface[j]
     out.update(hausdorff_to_surface=float(to_surface[i] / diagonal), hausdorff_to_mesh=float(to_mesh[j] / diagonal),
-               hausdorff_at=tuple(float(c) for c in at))
+               hausdorff_at=tuple(float(c) / scale for c in at))
     return out
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import re
 import sys
 import time
 import warnings
@@ -31,6 +33,13 @@ class _UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # Values such as -1e-3 and -inf are numbers, not options (argparse's own pattern takes
+        # only -12 and -1.5), so that a negative size is refused as a size, not as a syntax error.
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+                                                   re.IGNORECASE)
+
     def error(self, message: str):  # argparse would print the usage and exit; we print one line
         raise _UsageError(message)
 
@@ -108,7 +117,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             # any other Python warning is shown as one line.
             warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"meshio(\.|$)")
             warnings.showwarning = _show_warning
-            args = parser.parse_args(argv)
+            args = parser.parse_args(None if argv is None else [os.fspath(a) if isinstance(a, os.PathLike) else a
+                                                                 for a in argv])
             if args.command is None:
                 raise _UsageError("choose a command: mesh, check or paper-table (see paroct --help)")
             return args.run(args)

@@ -9,6 +9,8 @@ import base64
 import contextlib
 import io
 import os
+import stat
+import warnings
 import zlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -31,19 +33,29 @@ _FORMAT_OVERRIDES = {
     ".vtu": ("vtu", {"binary": True}),
 }
 #: Surface-only formats, which cannot hold tets.
-_SURFACE_ONLY = {".stl", ".obj", ".off", ".ply", ".wrl", ".svg"}
+_SURFACE_ONLY = {".stl", ".obj", ".off", ".ply", ".wrl", ".svg", ".wkt"}
+#: Extensions whose meshio writer (5.3) gives no file of the tets: Nastran's asserts, Medit's
+#: binary .meshb and AFLR's .ugrid write files meshio cannot read back.
+_BROKEN_WRITERS = {".bdf": "Nastran", ".fem": "Nastran", ".nas": "Nastran", ".meshb": "binary Medit",
+                   ".ugrid": "UGRID"}
 
 
 def output_format(path: str | os.PathLike) -> tuple[str, dict]:
     """The meshio format name and writer options for an output path; ParoctError if it cannot hold tets."""
+    import meshio
+
     path = Path(path)
     ext = path.suffix.lower()
+    double = "".join(path.suffixes[-2:]).lower()  # .vol.gz, .dato.gz, .post.gz
+    if len(path.suffixes) > 1 and double in meshio.extension_to_filetypes:
+        ext = double
     if ext in _FORMAT_OVERRIDES:
         return _FORMAT_OVERRIDES[ext]
     if ext in _SURFACE_ONLY:
         raise ParoctError(f"{path}: {ext} holds surfaces only; write tets to .vtu, .msh, .mesh, .inp, .vtk or .xdmf")
-    import meshio
-
+    if ext in _BROKEN_WRITERS:
+        raise ParoctError(f"{path}: meshio's {_BROKEN_WRITERS[ext]} writer does not give a file of these tets that "
+                          "reads back; write .vtu, .msh, .mesh, .inp or .vtk instead")
     formats = meshio.extension_to_filetypes.get(ext)
     if not formats:
         raise ParoctError(f"{path}: unknown mesh format {ext or '(no extension)'!r}; use e.g. .vtu, .msh, .mesh, .inp, .vtk")
@@ -101,10 +113,15 @@ def _write_with_meshio(path: Path, fmt: str, options: dict, points: np.ndarray, 
     if triangles is not None:
         blocks.append(("triangle", triangles.astype(np.int64)))
         data = {name: [values[:len(tets)], values[len(tets):]] for name, values in cell_data.items()}
+    printed = io.StringIO()
     try:
-        meshio.write(path, meshio.Mesh(points, blocks, cell_data=data), file_format=fmt, **options)
+        with contextlib.redirect_stdout(printed):  # some writers print their warnings
+            meshio.write(path, meshio.Mesh(points, blocks, cell_data=data), file_format=fmt, **options)
     except ImportError as exc:
         raise ParoctError(f"{path}: writing {fmt} needs an extra package ({exc.name or exc}); install it or pick .vtu") from None
+    for line in printed.getvalue().splitlines():
+        if line.strip():
+            warnings.warn(f"meshio: {line.strip()}", stacklevel=3)
 
 
 def _checked(points, tets, cell_data: dict | None) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -413,8 +430,14 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     import meshio
 
     path = Path(path)
-    if not path.exists():
-        raise ParoctError(f"no such file: {path}")
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise ParoctError(f"no such file: {path}") from None
+    except OSError as exc:
+        raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):  # a folder; a pipe or a device would block or never end
+        raise ParoctError(f"{path} is not a regular file")
     ext = path.suffix.lower()
     formats = [None]  # meshio's choice by extension
     if ext in _FORMAT_OVERRIDES:  # ours first, then any other format of the extension (.msh: Gmsh, ANSYS)
@@ -432,12 +455,17 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         except (Exception, SystemExit) as exc:
             text = printed.getvalue() if isinstance(exc, SystemExit) else str(exc)
             lines = [line.strip() for line in text.splitlines() if line.strip()]
+            if isinstance(exc, KeyError) and exc.args:  # a cell naming a node the file lacks
+                lines = [f"a cell refers to node {int(exc.args[0]) if np.isscalar(exc.args[0]) else exc.args[0]}, "
+                         "which the file does not define"]
+            elif "need at least one array to concatenate" in text:  # meshio's .vtu reader on no cells
+                lines = ["it holds no cells"]
             first_error = first_error or (lines[0] if lines else f"not a {fmt or ext} file, or a damaged one")
     if raw is None:
         tried = f" (read as {' and as '.join(formats)})" if len(formats) > 1 else ""
         raise ParoctError(f"cannot read {path}{tried}: {first_error}")
-    blocks = [np.asarray(b.data, dtype=np.int64) for b in raw.cells if b.type == "tetra"]
-    if not blocks:
+    blocks = [np.asarray(b.data, dtype=np.int64).reshape(-1, 4) for b in raw.cells if b.type == "tetra"]
+    if not sum(len(b) for b in blocks):
         kinds = sorted({b.type for b in raw.cells}) or ["none"]
         raise ParoctError(f"{path} holds no tetrahedra (cells: {', '.join(kinds)})")
     return np.asarray(raw.points, dtype=np.float64)[:, :3], np.concatenate(blocks)

@@ -29,7 +29,7 @@ from .octree import (FaceBuckets, balance, face_buckets, faces_meeting_cells, oc
                      unique_level_keys)
 from .quality import OUTSIDE, outlier_flags, summarize
 from .repair import remove_pinches
-from .sizing import Region, SizeField, SizeFunction, size_field, size_seeds
+from .sizing import Region, SizeField, SizeFunction, positive_number, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
                        stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
@@ -130,11 +130,11 @@ def estimate_tets(surface: Surface, field: SizeField) -> int:
     TRANSITION_FACTOR in the rest of the box, never more than the uniform lattice of the box
     nor than solid_tets at size."""
     h = field.size
-    ext = surface.bbox_max - surface.bbox_min + 2 * h
-    box = float(np.prod(ext))
-    uniform = min(12 * box / h**3, solid_tets(surface, h))
-    graded = 12 * surface.area * BAND_CELLS / h**2 + TRANSITION_FACTOR * 12 * box / field.max_size**3
-    return int(min(uniform, graded)) if not field.regions and field.function is None else int(uniform)
+    cells = float(np.prod((surface.bbox_max - surface.bbox_min + 2 * h) / h))  # ratios: h^3 can underflow
+    uniform = min(12 * cells, solid_tets(surface, h))
+    graded = 12 * surface.area / h * BAND_CELLS / h + TRANSITION_FACTOR * 12 * cells / (field.max_size / h)**3
+    estimate = min(uniform, graded) if not field.regions and field.function is None else uniform
+    return int(min(estimate, 2**62))
 
 
 def solid_tets(surface: Surface, size: float) -> float:
@@ -144,7 +144,7 @@ def solid_tets(surface: Surface, size: float) -> float:
     lattice) it is 1.09-2.07 x the tets made; it bounds thin shells, where a band BAND_CELLS
     thick on both sides of every wall counts far more than the solid holds (session 14's
     fuzzed hollow cube: 127 M estimated, 36 M made)."""
-    return 12 * surface.volume / size**3 + 12 * surface.area / size**2
+    return 12 * surface.volume / size / size / size + 12 * surface.area / size / size
 
 
 def _available_memory() -> int:
@@ -173,15 +173,37 @@ class _Stages:
 
 
 def resolve_size(surface: Surface, size: float | None, divisions: float | None) -> float:
-    """The finest long edge: ``size`` if given, else the diagonal over ``divisions`` (default 40)."""
+    """The finest long edge: ``size`` if given, else the diagonal over ``divisions`` (default 40).
+    ParoctError for anything but a positive number, for a size above the part's bounding-box
+    diagonal (a mesh of nothing: most likely other units), and for one the octree cannot
+    reach (more than 2^MAX_FRAME_LEVELS sizes across the part)."""
     if size is not None:
-        if not (isinstance(size, (int, float, np.floating)) and np.isfinite(size) and size > 0):
-            raise ParoctError(f"size = {size}: the element size must be a positive number")
-        return float(size)
-    d = DEFAULT_DIVISIONS if divisions is None else divisions
-    if not (np.isfinite(d) and d > 0):
-        raise ParoctError(f"divisions = {d}: must be a positive number")
-    return surface.diagonal / d
+        h = positive_number("size", size)
+    else:
+        h = surface.diagonal / positive_number("divisions", DEFAULT_DIVISIONS if divisions is None else divisions)
+    if h > surface.diagonal:
+        raise ParoctError(f"size = {h:.6g} is larger than the whole part (its bounding-box diagonal is "
+                          f"{surface.diagonal:.6g}): check the units, or give --divisions (default {DEFAULT_DIVISIONS})")
+    if not h * 2.0**MAX_FRAME_LEVELS >= surface.diagonal:
+        raise ParoctError(f"size = {h:.6g} is too small for the part: its bounding-box diagonal {surface.diagonal:.6g} "
+                          f"is more than 2^{MAX_FRAME_LEVELS} sizes")
+    step = _float_step(surface)
+    if h < MIN_SIZE_STEPS * step:
+        raise ParoctError(f"size = {h:.6g} is less than {MIN_SIZE_STEPS} steps of float64 ({step:.3g} each) at the part's "
+                          f"coordinates (up to {np.abs(np.concatenate([surface.bbox_min, surface.bbox_max])).max():.6g}): "
+                          "the mesh's points could not be placed; move the part near the origin (subtract its centre)")
+    return h
+
+
+#: Smallest element size, in steps of float64 at the part's largest coordinate: points then
+#: sit to 1/256 of a size, angles to a fraction of a degree.  A cube of 1e-6 at 1e9 (its
+#: size 0.7 steps) made flat tets.
+MIN_SIZE_STEPS = 256
+
+
+def _float_step(surface: Surface) -> float:
+    """The spacing of float64 values at the surface's largest coordinate magnitude."""
+    return float(np.spacing(np.abs(np.concatenate([surface.bbox_min, surface.bbox_max])).max()))
 
 
 def mesh(
@@ -227,20 +249,27 @@ def mesh(
     any work.  progress: called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
-    surface = source if isinstance(source, Surface) else load_surface(source)
+    surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function)
-    floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else float(min_size)
-    if not (np.isfinite(floor) and floor > 0):
-        raise ParoctError(f"min_size = {min_size}: must be a positive number")
+    field_notes = []
+    floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
+    floor = min(h, max(floor, MIN_SIZE_STEPS * _float_step(surface)))  # thin walls refine no further
     whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
-    budget = _available_memory() if max_memory is None else int(max_memory)
+    budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
+    if progress is not None and not callable(progress):
+        raise ParoctError(f"progress = {progress!r}: must be a function taking a stage's name, or None")
     _check_memory(surface, field, budget)
+    for region in field.regions:
+        if region.size < h:
+            kind = type(region).__name__.lower()
+            field_notes.append(f"a refinement {kind} asks for size {region.size:.4g}, below size = {h:.4g}, the finest "
+                               f"the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer")
     loaded = time.perf_counter() - t0
     if progress:
         progress("load")
 
-    band, notes, stage_seconds = h, [], {"load": loaded}  # stage times add up over the attempts
+    band, notes, stage_seconds = h, list(field_notes), {"load": loaded}  # stage times add up over the attempts
     memory_bound, tried = False, []  # tried: whole-band sizes below h that a pass lost at
     while True:
         report = _pass_report(surface, field, band, stage_seconds)
@@ -497,13 +526,21 @@ def _local_tets(surface: Surface, field: SizeField, wanted: BandLevels) -> int:
     return int(min(local, solid_tets(surface, field.size / 2.0 ** int(depth.max(initial=0)))))
 
 
-def _check_memory(surface: Surface, field: SizeField, budget: int) -> None:
+def _check_memory(surface: Surface, field: SizeField, budget: float) -> None:
     tets = estimate_tets(surface, field)
     if tets * BYTES_PER_TET > budget:
         raise ParoctError(
-            f"size = {field.size:.6g} needs about {tets:.3g} lattice tets and {tets * BYTES_PER_TET / 2**30:.1f} GiB, "
-            f"more than the {budget / 2**30:.1f} GiB allowed; use a larger size or raise max_memory (--max-memory)"
+            f"size = {field.size:.6g} needs about {tets:.3g} lattice tets and {_bytes_text(tets * BYTES_PER_TET)}, "
+            f"more than the {_bytes_text(budget)} allowed; use a larger size or raise max_memory (--max-memory)"
         )
+
+
+def _bytes_text(n: float) -> str:
+    """A byte count as people read it: 812 bytes, 3.4 MiB, 2.1 GiB."""
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n:.0f} bytes"
 
 
 def _at_boundary_size(field: SizeField, band: float) -> SizeField:
@@ -592,7 +629,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
             if d not in crossings:
                 crossings[d] = rays.row_crossings(frame, snapped, faces, d)
         features = find_thin_features(frame, crossings, surface.vertices, faces)
-        advice = _thin_feature_advice(features, h)
+        advice = _thin_feature_advice(features, h, surface)
         walls = features.facing_below(THIN_FACING)
         if report.missed_vertices.size:
             walls = _with_missed_parts(walls, frame, snapped, faces, report.missed_vertices)
@@ -609,8 +646,10 @@ def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:
     bad = rays.first_winding_outside(crossings)
     if bad >= 0:
         x, y, z = rays.crossing_points(frame, crossings, np.array([bad]))[0]
+        grid = frame.h / 2.0**rays.snap_bits(frame)
         raise ParoctError(f"the surface intersects itself: a line through ({x:.6g}, {y:.6g}, {z:.6g}) enters or leaves "
-                          "the solid twice in a row (overlapping or folded parts); join the overlapping parts into "
+                          "the solid twice in a row (overlapping or folded parts, or parts less than about "
+                          f"{grid:.2g} apart, which the exact arithmetic's grid joins); join the overlapping parts into "
                           "one closed surface first (e.g. a union in manifold3d or a CAD tool)")
 
 
@@ -696,8 +735,11 @@ def _losses(report: MeshReport, surface: Surface) -> str:
     return " and ".join(lost)
 
 
-def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
-    """Names the thinnest wall and gap and a size that puts two element layers across them."""
+def _thin_feature_advice(features: ThinFeatures, h: float, surface: Surface) -> str:
+    """Names the thinnest wall and gap and a size that puts two element layers across them;
+    where the rows found none (a part thinner than their spacing is crossed by few or none),
+    the solid's mean thickness, twice its volume over its area (a slab's thickness; a rod's
+    or ball's is a half and a third of its width), and the size that is half of it."""
     found = []
     smallest = np.inf
     for walls, what in ((True, "wall"), (False, "gap")):
@@ -706,7 +748,12 @@ def _thin_feature_advice(features: ThinFeatures, h: float) -> str:
             found.append(f"thinnest {what} {hit[0]:.4g} near ({hit[1][0]:.4g}, {hit[1][1]:.4g}, {hit[1][2]:.4g})")
             smallest = min(smallest, hit[0])
     if not found:
-        return f"no wall or gap thinner than 2 x size = {2 * h:.4g} was found; try a smaller size"
+        mean = 2 * surface.volume / surface.area
+        if mean / 2 >= h:
+            return f"no wall or gap thinner than 2 x size = {2 * h:.4g} was found; try a smaller size"
+        return (f"no wall or gap thinner than 2 x size = {2 * h:.4g} was found along the lattice rows, but the solid is "
+                f"{mean:.4g} thick on average (twice its volume over its area): size = {mean / 2:.4g} or less would "
+                "put two elements across it")
     return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 

@@ -52,6 +52,31 @@ Region = Box | Sphere
 SizeFunction = Callable[[np.ndarray], np.ndarray]
 
 
+def positive_number(name: str, value, *, infinite: bool = False) -> float:
+    """value as a float: a real number (an int, float or numpy scalar, not a bool), positive
+    and finite (or +inf where ``infinite``); else ParoctError naming the option."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ParoctError(f"{name} = {value!r}: must be a positive number")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = float("inf")
+    if not (number > 0 and (np.isfinite(number) or (infinite and number == np.inf))):
+        raise ParoctError(f"{name} = {value!r}: must be a positive number")
+    return number
+
+
+def _point(name: str, value) -> np.ndarray:
+    """value as a (3,) float64 point of finite coordinates, else ParoctError naming it."""
+    try:
+        point = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        point = None
+    if point is None or point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ParoctError(f"{name} = {value!r}: must be three finite numbers (x, y, z)")
+    return point
+
+
 @dataclass(frozen=True)
 class SizeField:
     """What the user asked for: finest size, largest interior size, local refinements."""
@@ -73,19 +98,23 @@ def size_field(size: float, max_size: float | None = None, regions: Sequence[Reg
     down to a power-of-two multiple of size."""
     if max_size is None:
         max_size = DEFAULT_MAX_SIZE_FACTOR * size
-    if not (np.isfinite(max_size) and max_size >= size):
+    elif positive_number("max_size", max_size) < size:
         raise ParoctError(f"max_size = {max_size:.6g} must be at least size = {size:.6g}")
     depth = int(np.floor(np.log2(max_size / size) + 1e-9))
     depth = min(depth, MAX_LEVEL)
+    if isinstance(regions, (Box, Sphere)) or not isinstance(regions, (list, tuple)):
+        raise ParoctError(f"regions = {regions!r}: must be a list of paroct.Box and paroct.Sphere")
     for r in regions:
         if not isinstance(r, (Box, Sphere)):
             raise ParoctError(f"refinement region {r!r} is not a paroct Box or Sphere")
-        if not (np.isfinite(r.size) and r.size > 0):
-            raise ParoctError(f"refinement region size = {r.size}: must be a positive number")
-        if isinstance(r, Box) and not np.all(np.asarray(r.lo) <= np.asarray(r.hi)):
-            raise ParoctError(f"refinement box lo = {r.lo} is not below hi = {r.hi}")
-        if isinstance(r, Sphere) and not (np.isfinite(r.radius) and r.radius >= 0):
-            raise ParoctError(f"refinement sphere radius = {r.radius}: must be a non-negative number")
+        positive_number("refinement region size", r.size)
+        if isinstance(r, Box):
+            if not np.all(_point("refinement box lo", r.lo) <= _point("refinement box hi", r.hi)):
+                raise ParoctError(f"refinement box lo = {r.lo} is not below hi = {r.hi}")
+        else:
+            _point("refinement sphere center", r.center)
+            if r.radius != 0:
+                positive_number("refinement sphere radius", r.radius)
     if function is not None and not callable(function):
         raise ParoctError("size_function must be callable: (N, 3) points -> (N,) sizes")
     return SizeField(size=float(size), max_size=float(size * 2**depth), regions=tuple(regions), function=function)

@@ -11,12 +11,8 @@ they are closed and consistently oriented (outward normals, positive volume).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
-import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Union
 
 import manifold3d
@@ -24,10 +20,8 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
+from .readers import read_surface_file
 from .topology import link_fans, union, vertex_links
-
-#: Surface formats read through meshio, by file extension.
-SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply")
 
 SurfaceSource = Union[str, os.PathLike, manifold3d.Manifold, tuple]
 
@@ -50,6 +44,8 @@ class Surface:
     components: int
     bbox_min: np.ndarray = field(init=False, repr=False, compare=False)
     bbox_max: np.ndarray = field(init=False, repr=False, compare=False)
+    #: Set by load_surface on the surfaces it built; one made by hand is validated when meshed.
+    validated: bool = field(default=False, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         # Stages ask for the box a dozen times per mesh; a reduction over the vertices each time
@@ -66,171 +62,6 @@ class Surface:
     def to_manifold(self) -> manifold3d.Manifold:
         """The solid as a manifold3d.Manifold (built anew on each call)."""
         return _to_manifold(self.vertices, self.faces)
-
-
-def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) float64 (binary STL: float32, as stored) and triangles (F, 3) int64 of
-    a surface file (STL, OBJ, OFF, PLY).
-
-    Quadrilaterals and polygons are split into triangles.  Binary STL and OFF are read by
-    paroct, the others by meshio.  Raises ParoctError for a missing file, an unknown
-    extension or a file that cannot be parsed.
-    """
-    import meshio  # only at the edge of the package
-
-    path = Path(path)
-    if not path.exists():
-        raise ParoctError(f"no such file: {path}")
-    if path.is_dir():
-        raise ParoctError(f"{path} is a directory, not a surface file")
-    ext = path.suffix.lower()
-    if ext not in SURFACE_EXTENSIONS:
-        raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
-    if ext == ".off":  # meshio's OFF reader takes triangles only, and single spaces
-        return _read_off(path)
-    try:
-        soup = _read_binary_stl(path) if ext == ".stl" else None
-        if soup is not None:
-            return soup
-        # meshio's ASCII STL reader trips numpy overflow warnings and prints its own error
-        # line before raising; ours below is the one the user gets.
-        with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()), \
-                contextlib.redirect_stderr(io.StringIO()):
-            warnings.simplefilter("ignore", RuntimeWarning)
-            raw = meshio.read(path)
-    except (Exception, SystemExit) as exc:  # meshio raises many types, even SystemExit, for malformed files
-        text = str(exc).strip()
-        msg = text.splitlines()[0] if text and not isinstance(exc, SystemExit) else "malformed file"
-        raise ParoctError(f"cannot read {path} as {ext[1:].upper()}: {msg}") from None
-    tris = []
-    for block in raw.cells:
-        data = np.asarray(block.data, dtype=np.int64)
-        if block.type == "triangle":
-            tris.append(data)
-        elif block.type in ("quad", "polygon") or (data.ndim == 2 and data.shape[1] > 3 and block.type.startswith("polygon")):
-            for k in range(1, data.shape[1] - 1):  # fan split
-                tris.append(data[:, [0, k, k + 1]])
-    if not tris:
-        raise ParoctError(f"{path} holds no triangles")
-    return np.asarray(raw.points, dtype=np.float64)[:, :3], np.concatenate(tris)
-
-
-def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) float64 and triangles (F, 3) int64 of an ASCII OFF file: an ``OFF`` header
-    (``COFF``, ``NOFF``, ... too: extra numbers on a vertex line are ignored), the counts
-    ``V F [E]`` (on the header line or the next), V vertex lines and F face lines ``n i_1
-    ... i_n [colour]``, polygons split into fans; ``#`` comments and blank lines anywhere."""
-    def fail(why: str) -> ParoctError:
-        return ParoctError(f"cannot read {path} as OFF: {why}")
-
-    try:
-        text = path.read_bytes().decode("ascii")
-    except UnicodeDecodeError:
-        raise fail("not ASCII text (binary OFF is not read)") from None
-    fast = _off_triangles(text)
-    if fast is not None:
-        return fast
-    lines = [words for words in (line.split("#", 1)[0].split() for line in text.splitlines()) if words]
-    if not lines or not lines[0][0].upper().endswith("OFF"):
-        raise fail("the first line must be OFF (or COFF, NOFF, ...)")
-    counts, start = (lines[0][1:], 1) if len(lines[0]) > 1 else ((lines[1] if len(lines) > 1 else []), 2)
-    try:
-        n_vertices, n_faces = int(counts[0]), int(counts[1])
-    except (IndexError, ValueError):
-        raise fail(f"expected the counts 'vertices faces [edges]', got {' '.join(counts)!r}") from None
-    vertex_lines = lines[start:start + n_vertices]
-    face_lines = lines[start + n_vertices:start + n_vertices + n_faces]
-    if len(vertex_lines) < n_vertices or len(face_lines) < n_faces:
-        raise fail(f"the header says {n_vertices} vertices and {n_faces} faces, the file holds "
-                   f"{len(vertex_lines)} and {len(face_lines)} (truncated?)")
-    try:
-        vertices = np.array([words[:3] for words in vertex_lines], dtype=np.float64)
-        tris = []
-        for words in face_lines:
-            n = int(words[0])
-            if n < 3 or len(words) < n + 1:
-                raise fail(f"a face line reads {' '.join(words)!r}: expected n >= 3 and n indices")
-            ids = [int(w) for w in words[1:n + 1]]
-            tris.extend((ids[0], ids[k], ids[k + 1]) for k in range(1, n - 1))
-    except ValueError as exc:
-        raise fail(str(exc)) from None
-    if vertices.shape != (n_vertices, 3):
-        raise fail("a vertex line has fewer than 3 coordinates")
-    if not tris:
-        raise ParoctError(f"{path} holds no triangles")
-    return vertices, np.asarray(tris, dtype=np.int64)
-
-
-def _off_triangles(text: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """_read_off's result for the common file, or None: the header ``OFF`` alone on its line,
-    the counts on the next (comments and blank lines between), then no comment, 3
-    coordinates a vertex and triangles ``3 a b c``.  The tokens are converted by numpy at
-    once (a line-by-line parse took 0.33 s of armadillo's 86 k triangles)."""
-    header, pos = [], 0
-    while len(header) < 2 and pos < len(text):
-        end = text.find("\n", pos)
-        end = len(text) if end < 0 else end
-        words = text[pos:end].split("#", 1)[0].split()
-        pos = end + 1
-        if words:
-            header.append(words)
-    if len(header) < 2 or header[0] != ["OFF"] or "#" in text[pos:]:
-        return None
-    counts = header[1]
-    if len(counts) not in (2, 3) or not all(c.isdigit() for c in counts):
-        return None
-    n_vertices, n_faces = int(counts[0]), int(counts[1])
-    tokens = text[pos:].split()
-    if len(tokens) != 3 * n_vertices + 4 * n_faces:
-        return None
-    try:
-        vertices = np.array(tokens[:3 * n_vertices], dtype=np.float64).reshape(n_vertices, 3)
-        faces = np.array(tokens[3 * n_vertices:], dtype=np.int64).reshape(n_faces, 4)
-    except ValueError:
-        return None
-    if n_faces == 0 or not np.all(faces[:, 0] == 3):
-        return None
-    return vertices, np.ascontiguousarray(faces[:, 1:])
-
-
-#: A binary STL facet: normal, three corners (float32) and an attribute word, 50 bytes.
-_STL_FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
-
-
-def _read_binary_stl(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """Triangle soup (3F corners (3F, 3) float32 as stored, faces (F, 3) int64) of a binary STL, or None
-    if the file is text that may be ASCII STL.  ParoctError if it is neither: binary, but
-    shorter than 84 + 50 F bytes for the F in its header (truncated, or not an STL).
-
-    Read straight into numpy: meshio's STL reader merges the corners with a row-wise
-    np.unique that took half a second on an 86 k-triangle part; _weld merges them later anyway.
-    The corners stay float32 (one copy out of the facets): _weld compares their bits and
-    writes float64, exactly; converting first cost armadillo's 86 k triangles 5 ms of 21.
-    """
-    size = path.stat().st_size
-    with open(path, "rb") as fh:
-        head = fh.read(84)
-        n = int(np.frombuffer(head, dtype="<u4", count=1, offset=80)[0]) if len(head) == 84 else -1
-        if size != 84 + 50 * n:
-            if _looks_like_text(head + fh.read(428)):
-                return None
-            if n < 0 or size < 84 + 50 * n:
-                have = f"{size} bytes" if n < 0 else f"{size} bytes, its header says {n} triangles (84 + 50 x {n} = {84 + 50 * n} bytes)"
-                raise ParoctError(f"neither ASCII STL (text starting with 'solid') nor a complete "
-                                  f"binary STL: {have}; truncated or not an STL file")
-        # Bytes past the last facet (some exporters pad) are ignored, as other readers do.
-        fh.seek(84)
-        facets = np.fromfile(fh, dtype=_STL_FACET, count=n)
-    corners = np.ascontiguousarray(facets["corners"]).reshape(-1, 3)
-    return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
-
-
-def _looks_like_text(start: bytes) -> bool:
-    """Whether a file starting with these bytes may be ASCII STL: 'solid' after optional
-    whitespace, and no NUL or other control bytes but whitespace."""
-    if not start.lstrip().lower().startswith(b"solid"):
-        return False
-    return not any(b < 9 or 13 < b < 32 for b in start)
 
 
 def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -657,12 +488,14 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     coincident vertices (a triangle soup, as files hold them); False keeps the vertices as
     numbered, dropping only those no face uses (a manifold3d mesh, whose sheets touching
     along an edge or at a vertex have vertices of their own)."""
-    vertices = np.asarray(vertices)
+    try:
+        vertices, faces = np.asarray(vertices), np.asarray(faces)
+    except (ValueError, TypeError) as exc:  # ragged nested lists
+        raise ParoctError(f"{label}: vertices and faces must be (V, 3) and (F, 3) arrays ({exc})") from None
     if vertices.dtype.kind not in "iuf":
         raise ParoctError(f"{label}: vertices.dtype = {vertices.dtype}, expected real numbers")
     if vertices.dtype != np.float32:  # float32 (binary STL) is welded as it is, exactly
         vertices = vertices.astype(np.float64, copy=False)
-    faces = np.asarray(faces)
     if vertices.ndim != 2 or vertices.shape[1] != 3:
         raise ParoctError(f"{label}: vertices.shape = {vertices.shape}, expected (V, 3)")
     if faces.ndim != 2 or faces.shape[1] != 3:
@@ -673,11 +506,11 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(f"{label}: faces.dtype = {faces.dtype}, expected integers")
     if faces.shape[0] > MAX_FACES:
         raise ParoctError(f"{label}: len(faces) = {faces.shape[0]}; paroct reads surfaces of at most {MAX_FACES} triangles")
-    faces = faces.astype(np.int64, copy=False)
-    if faces.min() < 0 or faces.max() >= vertices.shape[0]:
+    if faces.min() < 0 or faces.max() >= vertices.shape[0]:  # in the given type: uint64 ids wrap in int64
         raise ParoctError(
             f"{label}: face indices span {faces.min()}..{faces.max()} but len(vertices) = {vertices.shape[0]}"
         )
+    faces = faces.astype(np.int64, copy=False)
     vertices, faces, finite = _weld(vertices, faces) if weld else _used_only(vertices, faces)
     if not finite:
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
@@ -697,10 +530,10 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         volume, area = _volume_area(vertices, faces)
         if not volume > 0:
             raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")
-        return Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1)
+        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1))
 
     # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
-    solids, cavities, signed_sum, area_sum = [], [], 0.0, 0.0
+    solids, cavities, lost, signed_sum, area_sum = [], [], [], 0.0, 0.0
     by_shell = np.argsort(shell, kind="stable")  # faces[shell == c] for each c would be O(F) a shell
     bounds = np.searchsorted(shell[by_shell], np.arange(n_shells + 1))
     for c in range(n_shells):
@@ -719,8 +552,17 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
             solids.append(part)
         elif vol < 0:
             cavities.append(_to_manifold(shell_vertices, shell_faces[:, ::-1]))
+            lost.append((shell_faces.shape[0], (shell_vertices.min(axis=0) + shell_vertices.max(axis=0)) / 2, vol))
     if not solids:
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (inside out?)")
+    if cavities:  # a cavity is a hole in a solid: one in none bounds nothing (an inside-out part?)
+        everything = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
+        for cavity, (n, centre, vol) in zip(cavities, lost):
+            if (cavity - everything).volume() > 1e-9 * cavity.volume():
+                x, y, z = centre
+                raise ParoctError(f"{label}: a shell of {n} triangles around ({x:.6g}, {y:.6g}, {z:.6g}) encloses negative "
+                                  f"volume ({vol:.6g}) and lies in no other shell: inside out? (a cavity must lie "
+                                  "inside a solid; reverse its triangles if it is a solid)")
     solid = _nested_union(solids, cavities)
     volume = solid.volume()
     if not volume > 0:
@@ -733,13 +575,18 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         # at corners stay apart, as they do in the mesh.  manifold3d's union would join some of
         # them through zero-width necks (a 6 x 6 x 6 checkerboard of 108 cubes came back as 36
         # shells), a topology no mesh keeps.
-        return Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, n_shells), n_shells)
+        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, n_shells), n_shells))
     out = solid.to_mesh64()
     out_vertices = np.array(out.vert_properties, dtype=np.float64)[:, :3]
     out_faces = np.array(out.tri_verts, dtype=np.int32)
     *_, fans, shell = _shell_topology(out_faces, out_vertices.shape[0])
     n_shells = int(shell.max()) + 1
-    return Surface(out_vertices, out_faces, float(volume), float(area), _genus(fans, out_faces, n_shells), n_shells)
+    return _validated(Surface(out_vertices, out_faces, float(volume), float(area), _genus(fans, out_faces, n_shells), n_shells))
+
+
+def _validated(surface: Surface) -> Surface:
+    object.__setattr__(surface, "validated", True)
+    return surface
 
 
 #: Shells whose union's volume and area are their signed volumes' and areas' sums to this
@@ -823,6 +670,8 @@ def load_surface(source: SurfaceSource) -> Surface:
         except ParoctError:
             # A touching edge no pairing undoes (flat faces around it): the manifold's own vertices.
             return surface_from_arrays(positions, faces, "manifold", weld=False)
+    if isinstance(source, Surface):  # one of ours as it is; one made by hand checked like arrays
+        return source if source.validated else surface_from_arrays(source.vertices, source.faces)
     if isinstance(source, tuple):
         if len(source) != 2:
             raise ParoctError(f"expected a (vertices, faces) pair, got a tuple of {len(source)}")

@@ -1,0 +1,227 @@
+"""Surface files as they are found, and bad input of every kind (session 38's fuzzing): each
+valid file reads as the solid it holds, each bad one gives one ParoctError that says why."""
+
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+import paroct
+from paroct import ParoctError, load_surface
+from paroct.check import check_mesh
+from paroct.cli import main
+from paroct.readers import read_surface_file
+
+DATA = Path(__file__).resolve().parent.parent / "data"
+CUBE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+CUBE_F = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5],
+                   [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
+BOX_V = CUBE_V * [1, 2, 3]  # volume 6, so an axis swap or a lost face shows
+
+
+def _is_box(path) -> bool:
+    surface = load_surface(path)
+    return surface.volume == pytest.approx(6.0, rel=1e-12) and (surface.components, surface.genus) == (1, 0)
+
+
+def _obj_lines(faces, corner) -> str:
+    text = "# a box\nmtllib box.mtl\no box\n" + "".join(f"v {x:g} {y:g} {z:g}\n" for x, y, z in BOX_V)
+    text += "vt 0 0\nvn 0 0 1\ns off\ng sides\nusemtl grey\n"
+    return text + "".join("f " + " ".join(corner(i) for i in f) + "\n" for f in faces)
+
+
+@pytest.mark.parametrize("corner", [
+    lambda i: f"{i + 1}",
+    lambda i: f"{i - 8}",  # relative: -1 is the latest vertex
+    lambda i: f"{i + 1}/1",
+    lambda i: f"{i + 1}/1/1",
+    lambda i: f"{i + 1}//1",
+])
+def test_obj_corners_in_every_form(tmp_path, corner):
+    path = tmp_path / "box.obj"
+    path.write_text(_obj_lines(CUBE_F, corner))
+    assert _is_box(path)
+
+
+def test_obj_quads_split_into_fans(tmp_path):
+    quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    path = tmp_path / "box.obj"
+    path.write_text(_obj_lines(quads, lambda i: f"{i + 1}"))
+    assert _is_box(path) and read_surface_file(path)[1].shape == (12, 3)
+
+
+def _ply(fmt: str, vertex_props: list, face_list: str = "vertex_indices", faces=CUBE_F, extra=b"") -> bytes:
+    """A PLY of the box: vertex properties in the given order (x, y, z among others), faces."""
+    header = [f"ply\nformat {fmt} 1.0\ncomment made by hand\nelement vertex 8\n"]
+    header += [f"property {t} {n}\n" for n, t in vertex_props]
+    header += [f"element face {len(faces)}\nproperty list uchar int {face_list}\nproperty uchar flags\n"]
+    header += ["element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n"]
+    values = [[{"x": x, "y": y, "z": z}.get(n, 7) for n, _ in vertex_props] for x, y, z in BOX_V]
+    if fmt == "ascii":
+        body = "".join(" ".join(f"{v:g}" for v in row) + "\n" for row in values)
+        body += "".join(f"{len(f)} " + " ".join(map(str, f)) + " 0\n" for f in faces) + "0 1\n"
+        return "".join(header).encode() + body.encode() + extra
+    order = "<" if fmt == "binary_little_endian" else ">"
+    codes = {"float": "f", "double": "d", "uchar": "B", "int": "i", "short": "h"}
+    body = b"".join(struct.pack(order + "".join(codes[t] for _, t in vertex_props), *row) for row in values)
+    body += b"".join(struct.pack(f"{order}B{len(f)}iB", len(f), *f, 0) for f in faces)
+    return "".join(header).encode() + body + struct.pack(order + "ii", 0, 1) + extra
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+@pytest.mark.parametrize("props, face_list", [
+    ([("x", "float"), ("y", "float"), ("z", "float")], "vertex_indices"),
+    ([("z", "double"), ("nx", "float"), ("y", "double"), ("x", "double"), ("red", "uchar")], "vertex_index"),
+])
+def test_ply_in_every_byte_order_and_property_order(tmp_path, fmt, props, face_list):
+    path = tmp_path / "box.ply"
+    path.write_bytes(_ply(fmt, props, face_list))
+    assert _is_box(path)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_ply_with_mixed_polygons(tmp_path, fmt):
+    faces = [[0, 3, 2, 1], [4, 5, 6], [4, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    path = tmp_path / "box.ply"
+    path.write_bytes(_ply(fmt, [("x", "float"), ("y", "float"), ("z", "float")], faces=faces))
+    assert _is_box(path)
+
+
+def test_ply_files_meshio_writes_read_the_same(tmp_path):
+    ref = load_surface(DATA / "angle_block.stl")
+    for binary in (True, False):
+        path = tmp_path / f"part{binary}.ply"
+        meshio.write(path, meshio.Mesh(ref.vertices, [("triangle", ref.faces)]), binary=binary)
+        back = load_surface(path)
+        assert np.array_equal(back.vertices, ref.vertices) and np.array_equal(back.faces, ref.faces)
+
+
+def _ascii_stl(keyword=str) -> str:
+    lines = [keyword("solid") + " box"]
+    for f in CUBE_F:
+        lines += [keyword("facet normal") + " 0 0 0", keyword("outer loop")]
+        lines += [f"{keyword('vertex')} {x:g} {y:g} {z:g}" for x, y, z in BOX_V[f]]
+        lines += [keyword("endloop"), keyword("endfacet")]
+    return "\n".join(lines + [keyword("endsolid") + " box", ""])
+
+
+@pytest.mark.parametrize("encode", [
+    lambda t: t.encode(),
+    lambda t: b"\xef\xbb\xbf" + t.encode(),  # UTF-8 byte-order mark
+    lambda t: t.encode("utf-16"),  # with its byte-order mark
+    lambda t: t.replace("\n", "\r\n").encode(),
+])
+def test_ascii_stl_as_editors_save_it(tmp_path, encode):
+    path = tmp_path / "box.stl"
+    path.write_bytes(encode(_ascii_stl()))
+    assert _is_box(path)
+    path.write_bytes(encode(_ascii_stl(str.upper)))
+    assert _is_box(path)
+
+
+@pytest.mark.parametrize("name, content, match", [
+    ("x.obj", b"f 1 2 3\n", r"a face refers to vertex 3 \(counting from 1\), but there are 0 vertices"),
+    ("x.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", r"line 4 reads 'f 0 1 2': vertex indices count from 1"),
+    ("x.obj", b"v 0 0 0\nv 1 0 0\nf 1 2\n", r"line 3 reads 'f 1 2': a face needs at least 3 corners"),
+    ("x.obj", b"v 0 0 zero\n", r"a vertex coordinate 'zero' is not a number"),
+    ("x.ply", b"ply\nformat ascii 1.0\nend_header\n", r"expected 'vertex' and 'face' elements, the header declares none"),
+    ("x.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+              b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",
+     r"the header says 3 vertex elements, the file ends before them"),
+    ("x.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              b"property float z\nelement face 2000000000\nproperty list uchar int vertex_indices\nend_header\n"
+              + bytes(36 + 13), r"the header says 2000000000 face elements, at least 2000000000 bytes, but 13 are left"),
+    ("x.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty quad x\nend_header\n",
+     r"header line 'property quad x' is not PLY"),
+    ("x.off", b"OFF\n0 0 0\n", r"empty surface \(len\(vertices\) = 0, len\(faces\) = 0\)"),
+    ("x.stl", b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n",
+     r"1 'facet', 0 'endfacet' and 2 'vertex' keywords"),
+])
+def test_malformed_files_are_refused_saying_why(tmp_path, name, content, match):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ParoctError, match=match):
+        load_surface(path)
+
+
+def test_things_that_are_not_files_are_refused_without_waiting(tmp_path):
+    fifo = tmp_path / "pipe.stl"
+    os.mkfifo(fifo)
+    with pytest.raises(ParoctError, match="is not a regular file"):
+        load_surface(fifo)
+    assert main(["check", str(fifo)]) == 2
+    with pytest.raises(ParoctError, match="is a directory"):
+        load_surface(tmp_path)
+
+
+@pytest.mark.parametrize("vertices, faces, match", [
+    ([[0, 0, 0], [1, 0, 0], [0, 1]], [[0, 1, 2]], r"must be \(V, 3\) and \(F, 3\) arrays"),
+    (CUBE_V, [[0, 1, 2], [0, 1]], r"must be \(V, 3\) and \(F, 3\) arrays"),
+    (CUBE_V, np.where(CUBE_F == 7, 2**64 - 1, CUBE_F).astype(np.uint64),
+     r"face indices span 0..18446744073709551615 but len\(vertices\) = 8"),
+])
+def test_arrays_of_the_wrong_shape_are_refused(vertices, faces, match):
+    with pytest.raises(ParoctError, match=match):
+        load_surface((vertices, faces))
+
+
+def test_an_inside_out_shell_is_refused_not_dropped():
+    beside = (np.vstack([CUBE_V, CUBE_V + [3, 0, 0]]), np.vstack([CUBE_F, CUBE_F[:, ::-1] + 8]))
+    around = (np.vstack([CUBE_V * 3 - 1, CUBE_V]), np.vstack([CUBE_F[:, ::-1], CUBE_F + 8]))
+    for source, centre in ((beside, r"\(3.5, 0.5, 0.5\)"), (around, r"\(0.5, 0.5, 0.5\)")):
+        with pytest.raises(ParoctError, match=r"a shell of 12 triangles around " + centre + r" encloses negative volume"):
+            load_surface(source)
+    hollow = (np.vstack([CUBE_V * 3 - 1, CUBE_V]), np.vstack([CUBE_F, CUBE_F[:, ::-1] + 8]))  # a cavity: fine
+    assert load_surface(hollow).volume == pytest.approx(26.0)
+
+
+def test_a_surface_built_by_hand_is_checked_before_meshing():
+    open_box = paroct.Surface(CUBE_V, CUBE_F[2:].astype(np.int32), 1.0, 6.0, 0, 1)
+    with pytest.raises(ParoctError, match="open surface, 4 boundary edges"):
+        paroct.mesh(open_box, divisions=12)
+    wrong_volume = paroct.Surface(CUBE_V, CUBE_F.astype(np.int32), -5.0, 0.0, 0, 1)
+    assert load_surface(wrong_volume).volume == pytest.approx(1.0)  # measured again, not taken
+    ours = load_surface((CUBE_V, CUBE_F))
+    assert load_surface(ours) is ours
+
+
+def test_meshing_and_checking_do_not_depend_on_the_scale():
+    """The same cube from 1e-99 to 1e99 across: the same mesh, angles and check (the quality
+    measures' fourth powers of lengths over- and underflowed at 1e77)."""
+    ref = paroct.mesh((CUBE_V, CUBE_F), divisions=12)
+    ref_check = check_mesh(ref.mesh.points, ref.mesh.tets, load_surface((CUBE_V, CUBE_F)))
+    for scale in (1e-99, 1e-80, 1e80, 1e99):
+        source = (CUBE_V * scale, CUBE_F)
+        result = paroct.mesh(source, divisions=12)
+        assert np.array_equal(result.mesh.tets, ref.mesh.tets) and not result.report.warnings
+        assert (result.report.min_dihedral, result.report.max_dihedral) == pytest.approx(
+            (ref.report.min_dihedral, ref.report.max_dihedral), abs=1e-9)
+        checked = check_mesh(result.mesh.points, result.mesh.tets, load_surface(source))
+        assert checked.ok and checked.min_dihedral == pytest.approx(ref_check.min_dihedral, abs=1e-9)
+        assert checked.hausdorff == pytest.approx(ref_check.hausdorff, rel=1e-9)
+        assert checked.volume_error == pytest.approx(ref_check.volume_error, abs=1e-12)
+
+
+def test_a_part_too_small_for_its_coordinates_is_refused():
+    with pytest.raises(ParoctError, match=r"less than 256 steps of float64 .* move the part near the origin"):
+        paroct.mesh((CUBE_V * 1e-6 + 1e9, CUBE_F), divisions=12)
+
+
+def test_cli_reads_negative_numbers_as_numbers(tmp_path, capsys):
+    for value in ("-inf", "-1e-3"):
+        assert main(["mesh", DATA / "xyz_cube.stl", "-o", tmp_path / "x.vtu", "--size", value]) == 2
+        assert capsys.readouterr().err.strip() == f"paroct: error: size = {float(value)}: must be a positive number"
+
+
+def test_check_names_what_a_bad_mesh_file_lacks(tmp_path, capsys):
+    points = np.eye(4, 3)
+    meshio.write(tmp_path / "empty.vtu", meshio.Mesh(points, [("tetra", np.zeros((0, 4), int))]))
+    (tmp_path / "bad.inp").write_text("*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n")
+    for name, why in (("empty.vtu", "it holds no cells"), ("bad.inp", "a cell refers to node 3, which the file does not define")):
+        assert main(["check", str(tmp_path / name)]) == 2
+        assert capsys.readouterr().err.strip().endswith(why)
