@@ -582,3 +582,24 @@ def surface_patches(vertices: np.ndarray, faces: np.ndarray, feature_angle: floa
                     labels[g] = count
                     todo.append(g)
     return labels
+
+
+def triangles_cross(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether triangles a and b (3, 3) cross: an edge of one passes through the other's
+    interior with its ends strictly on both sides of that plane and the line strictly inside
+    the three edges, with exact rational arithmetic."""
+    from fractions import Fraction
+
+    def orient(p, q, r, s):
+        (bx, by, bz), (cx, cy, cz), (dx, dy, dz) = ([Fraction(u) - Fraction(v) for u, v in zip(w, p)] for w in (q, r, s))
+        det = bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx)
+        return (det > 0) - (det < 0)
+
+    def edge_through(p, q, t):
+        sp, sq = orient(*t, p), orient(*t, q)
+        if sp == 0 or sq == 0 or sp == sq:
+            return False
+        signs = {orient(p, q, t[i], t[(i + 1) % 3]) for i in range(3)}
+        return len(signs) == 1 and 0 not in signs
+
+    return any(edge_through(x[i], x[(i + 1) % 3], y) for x, y in ((a, b), (b, a)) for i in range(3))

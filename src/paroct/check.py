@@ -17,16 +17,16 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
+from .intersections import crossing_triangles
 from .quality import tet_quality, unit_scaled
 from .surface import Surface
 from .topology import boundary_faces, match_faces, surface_topology
+from .trigrid import triangle_grid
 
 #: Below this sin^2 of the angle at a triangle's first vertex, the triangle is treated as its
 #: three edges: then the error of the plane distance (eps / sin) and of the edge distance
 #: (sin x edge length) are both about sqrt(eps) relative.
 _SLIVER_SIN2 = 1e-16
-#: Largest number of grid cells along one axis of the triangle search grid.
-_MAX_CELLS_PER_AXIS = 256
 
 
 @nb.njit(cache=True, inline="always")
@@ -87,38 +87,6 @@ def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.nda
     if points.shape[0]:
         _pair_distances(points, triangles, out)
     return out
-
-
-@nb.njit(cache=True)
-def _bin_triangles(vertices, faces, origin, cell, dims):
-    """CSR lists of the triangles whose bounding box meets each grid cell: (start (C + 1,), items)."""
-    nf = faces.shape[0]
-    lo = np.empty((nf, 3), dtype=np.int64)
-    hi = np.empty((nf, 3), dtype=np.int64)
-    n_cells = dims[0] * dims[1] * dims[2]
-    start = np.zeros(n_cells + 1, dtype=np.int64)
-    for f in range(nf):
-        for k in range(3):
-            mn = min(vertices[faces[f, 0], k], vertices[faces[f, 1], k], vertices[faces[f, 2], k])
-            mx = max(vertices[faces[f, 0], k], vertices[faces[f, 1], k], vertices[faces[f, 2], k])
-            lo[f, k] = min(dims[k] - 1, max(0, np.int64(math.floor((mn - origin[k]) / cell))))
-            hi[f, k] = min(dims[k] - 1, max(0, np.int64(math.floor((mx - origin[k]) / cell))))
-        for i in range(lo[f, 0], hi[f, 0] + 1):
-            for j in range(lo[f, 1], hi[f, 1] + 1):
-                for k in range(lo[f, 2], hi[f, 2] + 1):
-                    start[(i * dims[1] + j) * dims[2] + k + 1] += 1
-    for c in range(n_cells):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    items = np.empty(start[n_cells], dtype=np.int64)
-    for f in range(nf):
-        for i in range(lo[f, 0], hi[f, 0] + 1):
-            for j in range(lo[f, 1], hi[f, 1] + 1):
-                for k in range(lo[f, 2], hi[f, 2] + 1):
-                    c = (i * dims[1] + j) * dims[2] + k
-                    items[fill[c]] = f
-                    fill[c] += 1
-    return start, items
 
 
 @nb.njit(cache=True, inline="always")
@@ -217,19 +185,7 @@ def nearest_triangles(queries: np.ndarray, vertices: np.ndarray, faces: np.ndarr
     out_face = np.empty(queries.shape[0], dtype=np.int64)
     if queries.shape[0] == 0:
         return out, out_face
-    used = vertices[np.unique(faces)]
-    lo = np.minimum(used.min(axis=0), queries.min(axis=0))
-    hi = np.maximum(used.max(axis=0), queries.max(axis=0))
-    extent = hi - lo
-    longest = float(extent.max())
-    if longest == 0.0:
-        longest = 1.0
-    cell = max(float(np.prod(np.maximum(extent, 1e-9 * longest)) / faces.shape[0]) ** (1 / 3),
-               longest / _MAX_CELLS_PER_AXIS)
-    # Pad the box by a little so that rounding in the cell index never leaves a point outside.
-    origin = lo - 0.5 * cell
-    dims = np.maximum(1, np.ceil((extent + cell) / cell).astype(np.int64))
-    start, items = _bin_triangles(vertices, faces, origin, cell, dims)
+    origin, cell, dims, start, items = triangle_grid(vertices, faces, queries)
     _nearest_distances(queries, vertices, faces, origin, cell, dims, start, items, out, out_face)
     return out, out_face
 
@@ -318,6 +274,17 @@ def _grid_cells(points, radius):
     return lo, cell, dims, start, order
 
 
+@nb.njit(cache=True)
+def triangle_centres(vertices, faces):
+    """Centroids (F, 3) float64 of triangles (F, 3) over vertices (V, 3) (one pass: numpy's
+    vertices[faces].mean(axis=1) gathers an (F, 3, 3) temporary)."""
+    out = np.empty((faces.shape[0], 3))
+    for f in range(faces.shape[0]):
+        for i in range(3):
+            out[f, i] = (vertices[faces[f, 0], i] + vertices[faces[f, 1], i] + vertices[faces[f, 2], i]) / 3.0
+    return out
+
+
 def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int = 3, seed: int = 0) -> np.ndarray:
     """Points (S, 3) on triangles: every used vertex, every centroid, and ``per_triangle``
     uniformly random points per triangle (numpy Generator with ``seed``, so repeatable)."""
@@ -341,6 +308,8 @@ class CheckReport:
     Quality fields are over all tets (an inverted tet counts as dihedral angles 0 and 180,
     3r/R 0); they are NaN for an empty mesh.  ``boundary_*`` describe the triangles on
     exactly one tet.  The surface fields are None unless a surface was given; the
+    surface_crossings counts the surface's triangles that cross another (a surface that
+    intersects itself bounds no solid, crossing_at is one's centre); the
     Hausdorff distances are relative to the surface's bounding-box diagonal:
     ``hausdorff_to_surface`` is the largest distance from a mesh-boundary sample to the
     surface, ``hausdorff_to_mesh`` from a surface sample to the mesh boundary, and
@@ -368,6 +337,8 @@ class CheckReport:
     hausdorff_to_surface: float | None = None
     hausdorff_to_mesh: float | None = None
     hausdorff_at: tuple[float, float, float] | None = None
+    surface_crossings: int | None = None
+    crossing_at: tuple[float, float, float] | None = None
 
     @property
     def boundary_manifold(self) -> bool:
@@ -410,6 +381,10 @@ class CheckReport:
         if self.boundary_bad_vertices:
             out.append(f"boundary not manifold: at {self.boundary_bad_vertices} vertices the boundary triangles "
                        "do not form one closed fan")
+        if self.surface_crossings:
+            x, y, z = self.crossing_at
+            out.append(f"the surface intersects itself: {self.surface_crossings} of its triangles cross others, one "
+                       f"centred at ({x:.6g}, {y:.6g}, {z:.6g}); no mesh fills it as a solid")
         return out
 
     def format(self) -> str:
@@ -507,10 +482,13 @@ def check_mesh(
 
 
 def _surface_fields(points, faces, surface: Surface, scale: float, per_triangle: int, seed: int) -> dict:
-    """Solid volume and the two directed Hausdorff distances (relative to the diagonal);
-    points are the mesh's scaled by ``scale``, the surface is scaled alike."""
+    """Solid volume, the surface's self-crossings (intersections.crossing_triangles) and the two
+    directed Hausdorff distances (relative to the diagonal); points are the mesh's scaled by
+    ``scale``, the surface is scaled alike."""
+    crossing = np.flatnonzero(crossing_triangles(surface.vertices, surface.faces, np.arange(surface.faces.shape[0])) >= 0)
+    at = (tuple(float(c) for c in surface.vertices[surface.faces[crossing[0]]].mean(axis=0)) if crossing.size else None)
     out = dict(solid_volume=float(surface.volume), surface_components=int(surface.components),
-               surface_genus=int(surface.genus))
+               surface_genus=int(surface.genus), surface_crossings=int(crossing.size), crossing_at=at)
     diagonal = surface.diagonal * scale
     surface_faces = np.asarray(surface.faces, dtype=np.int64)
     vertices = surface.vertices * scale if scale != 1.0 else surface.vertices

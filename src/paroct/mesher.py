@@ -16,8 +16,9 @@ import numpy as np
 
 from . import rays
 from .boundary import DEFAULT_FEATURE_ANGLE, BoundaryPatches, boundary_patches
-from .check import far_from_points
+from .check import far_from_points, triangle_centres
 from .errors import ParoctError
+from .intersections import crossing_triangles
 from .features import ThinFeatures
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
@@ -95,6 +96,7 @@ class MeshReport:
     repaired_tets: int = 0
     bad_tets: int = 0
     missed_vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    missed_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     stage_seconds: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     notes: list = field(default_factory=list)
@@ -284,7 +286,7 @@ def mesh(
             while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
                 wholes.append(whole)
                 whole /= 2
-            if report.missed_vertices.size or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
+            if _missed(report) or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
                 wholes = [s for s in wholes if s != h / 2]
             local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes, progress,
                                                            stage_seconds)
@@ -631,8 +633,15 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
         features = find_thin_features(frame, crossings, surface.vertices, faces)
         advice = _thin_feature_advice(features, h, surface)
         walls = features.facing_below(THIN_FACING)
-        if report.missed_vertices.size:
-            walls = _with_missed_parts(walls, frame, snapped, faces, report.missed_vertices)
+        if _missed(report):
+            near = np.zeros(faces.shape[0], dtype=bool)
+            near[report.missed_faces] = True
+            if report.missed_vertices.size:
+                at_missed = np.zeros(snapped.shape[0], dtype=bool)
+                at_missed[report.missed_vertices] = True
+                near |= at_missed[faces].any(axis=1)
+            _refuse_crossings(surface, np.flatnonzero(near))
+            walls = _with_missed_parts(walls, frame, snapped, faces[near])
         stages.done("features")
     return result, lost, advice, walls
 
@@ -653,15 +662,31 @@ def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:
                           "one closed surface first (e.g. a union in manifold3d or a CAD tool)")
 
 
-def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
-                       missed: np.ndarray) -> ThinFeatures:
+def _missed(report: MeshReport) -> bool:
+    """Whether the boundary missed a surface vertex or triangle centre (_measure_misses)."""
+    return bool(report.missed_vertices.size or report.missed_faces.size)
+
+
+def _refuse_crossings(surface: Surface, near: np.ndarray) -> None:
+    """Refuse a surface whose triangles ``near`` (ids) cross other triangles: a mesh that misses
+    part of the surface may do so because the surface passes through the solid's inside (a
+    spike pushed through the far side), which the lattice rows need not see.  A part thinner
+    than the lattice crosses nothing, and is refined instead."""
+    other = crossing_triangles(surface.vertices, surface.faces, near)
+    hit = np.flatnonzero(other >= 0)
+    if hit.size:
+        f, g = int(near[hit[0]]), int(other[hit[0]])
+        x, y, z = surface.vertices[surface.faces[f]].mean(axis=0)
+        raise ParoctError(f"the surface intersects itself: its triangle {f} (centre ({x:.6g}, {y:.6g}, {z:.6g})) crosses "
+                          f"triangle {g}, and {hit.size - 1} more of the triangles near the parts the mesh misses cross "
+                          "others; repair the surface (e.g. remove the self-intersections in a mesh tool) first")
+
+
+def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray, around: np.ndarray) -> ThinFeatures:
     """walls plus samples of thickness 0 (unknown, see _thin_asks) at the centres of the
-    finest cells that the triangles around the missed surface vertices meet.  The rows
+    finest cells that the triangles ``around`` (B, 3) the missed surface points meet.  The rows
     measure a part thinner than their spacing only where one happens to cross it (a thin rod
     is crossed in a few places along its length), and its vertices may all lie at its ends."""
-    near = np.zeros(snapped.shape[0], dtype=bool)
-    near[missed] = True
-    around = faces[near[faces].any(axis=1)]
     cells = surface_cells(frame, snapped, around, rays.snap_bits(frame), frame.levels)
     points = frame.to_space(octant_lattice_anchors(cells, frame) + 0.5)
     return ThinFeatures(np.concatenate([walls.thickness, np.zeros(points.shape[0])]),
@@ -701,12 +726,17 @@ MISS_REACH = 3.0
 
 
 def _measure_misses(surface: Surface, points: np.ndarray, faces: np.ndarray, size: float, report: MeshReport) -> None:
-    """The surface vertices (indices) the mesh boundary (faces (B, 3) into points) misses:
-    no boundary vertex within MISS_REACH x size."""
+    """The surface vertices and triangles (by their centres; indices) the mesh boundary
+    (faces (B, 3) into points) misses: no boundary vertex within MISS_REACH x size.  A long
+    triangle's centre tells of a rod dropped between its ends, or of a spike through the solid."""
     # A kernel marks them: numpy's scatter of True at faces.ravel() took 4 ms of tray_bottom's
     # boundary at diag/40; compress is 3x points[mask].
     boundary_points = np.compress(used_vertices(faces, points.shape[0]), points, axis=0)
-    report.missed_vertices = np.flatnonzero(far_from_points(surface.vertices, boundary_points, MISS_REACH * size))
+    n = surface.vertices.shape[0]
+    far = far_from_points(np.concatenate([surface.vertices, triangle_centres(surface.vertices, surface.faces)]),
+                          boundary_points, MISS_REACH * size)
+    report.missed_vertices = np.flatnonzero(far[:n])
+    report.missed_faces = np.flatnonzero(far[n:])
 
 
 #: Volume loss (relative) above which mesh() raises instead of returning the mesh with a
@@ -728,9 +758,11 @@ def _losses(report: MeshReport, surface: Surface) -> str:
             f"the boundary has {report.boundary_components} components and genus {report.boundary_genus} "
             f"(input {report.input_components} and {report.input_genus})"
         )
-    if report.missed_vertices.size:
-        x, y, z = surface.vertices[report.missed_vertices[0]]
-        lost.append(f"the boundary misses {report.missed_vertices.size} surface vertices by more than "
+    if _missed(report):
+        x, y, z = (surface.vertices[report.missed_vertices[0]] if report.missed_vertices.size
+                   else surface.vertices[surface.faces[report.missed_faces[0]]].mean(axis=0))
+        lost.append(f"the boundary misses {report.missed_vertices.size} surface vertices and {report.missed_faces.size} "
+                    f"triangle centres by more than "
                     f"{MISS_REACH - 1:g} x size, e.g. ({x:.6g}, {y:.6g}, {z:.6g}) (a part thinner than the lattice was dropped)")
     return " and ".join(lost)
 
