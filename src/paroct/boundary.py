@@ -23,7 +23,7 @@ from .check import nearest_triangles
 from .errors import ParoctError
 from .features import face_normals
 from .surface import Surface
-from .topology import TET_FACES, match_faces, union
+from .topology import TET_FACES, edge_bucket_starts, match_faces, union
 
 #: Default feature angle, degrees: edges where the surface turns by more bound patches.
 DEFAULT_FEATURE_ANGLE = 40.0
@@ -87,12 +87,7 @@ def _patches(vertices, faces, normals, min_cos):
                 d += (vertices[q, k] - vertices[p, k]) ** 2
             if d > best:
                 best, longest[f] = d, j
-    start = np.zeros(nv + 1, dtype=np.int64)
-    for f in range(nf):
-        for j in range(3):
-            start[min(faces[f, j], faces[f, (j + 1) % 3]) + 1] += 1
-    for v in range(nv):
-        start[v + 1] += start[v]
+    start = edge_bucket_starts(faces, nv)
     fill = start[:-1].copy()
     slot = np.empty(3 * nf, dtype=np.int64)  # face * 3 + j of each edge occurrence
     for f in range(nf):

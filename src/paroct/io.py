@@ -9,7 +9,6 @@ import base64
 import contextlib
 import io
 import os
-import stat
 import warnings
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -20,6 +19,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
+from .readers import regular_file
 from .surface import _bounding_box
 
 if TYPE_CHECKING:
@@ -430,14 +430,7 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     import meshio
 
     path = Path(path)
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise ParoctError(f"no such file: {path}") from None
-    except OSError as exc:
-        raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(mode):  # a folder; a pipe or a device would block or never end
-        raise ParoctError(f"{path} is not a regular file")
+    regular_file(path, "a mesh file")
     ext = path.suffix.lower()
     formats = [None]  # meshio's choice by extension
     if ext in _FORMAT_OVERRIDES:  # ours first, then any other format of the extension (.msh: Gmsh, ANSYS)

@@ -32,16 +32,7 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     ParoctError for a missing or unreadable file, something that is not a regular file (a
     folder, a pipe), an unknown extension or a malformed file."""
     path = Path(path)
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise ParoctError(f"no such file: {path}") from None
-    except OSError as exc:
-        raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
-    if stat.S_ISDIR(mode):
-        raise ParoctError(f"{path} is a directory, not a surface file")
-    if not stat.S_ISREG(mode):  # a pipe or a device would block or never end
-        raise ParoctError(f"{path} is not a regular file (a pipe, socket or device); save the surface to a file first")
+    regular_file(path, "a surface file")
     ext = path.suffix.lower()
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
@@ -58,6 +49,21 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise ParoctError(f"cannot read {path} as {ext[1:].upper()}: a face refers to vertex {bad + 1} "
                           f"(counting from 1), but there are {vertices.shape[0]} vertices")
     return vertices, faces
+
+
+def regular_file(path: Path, what: str) -> None:
+    """ParoctError unless path names a regular file: missing, unreadable, a directory, or a
+    pipe, socket or device (whose open would block, or whose reading would never end)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise ParoctError(f"no such file: {path}") from None
+    except OSError as exc:
+        raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(mode):
+        raise ParoctError(f"{path} is a directory, not {what}")
+    if not stat.S_ISREG(mode):
+        raise ParoctError(f"{path} is not a regular file (a pipe, socket or device); save it to a file first")
 
 
 def _text(data: bytes) -> str:
@@ -396,21 +402,21 @@ def _ply_ascii(body: bytes, elements: list, fmt: str) -> dict:
 
 
 def _int_token(tokens: list, pos: int, name: str) -> int:
-    if pos >= len(tokens):
-        raise _Malformed(f"the file ends inside the {name} elements (truncated?)")
-    try:
-        return int(tokens[pos])
-    except ValueError:
-        raise _Malformed(f"a {name} list count {tokens[pos]!r} is not an integer") from None
+    return int(_token(tokens, pos, name, int, "list count"))
 
 
 def _float_token(tokens: list, pos: int, name: str) -> float:
+    return _token(tokens, pos, name, float, "value")
+
+
+def _token(tokens: list, pos: int, name: str, kind: type, what: str):
+    """tokens[pos] as kind, or _Malformed naming the element and what the token should be."""
     if pos >= len(tokens):
         raise _Malformed(f"the file ends inside the {name} elements (truncated?)")
     try:
-        return float(tokens[pos])
+        return kind(tokens[pos])
     except ValueError:
-        raise _Malformed(f"a {name} value {tokens[pos]!r} is not a number") from None
+        raise _Malformed(f"a {name} {what} {tokens[pos]!r} is not {'an integer' if kind is int else 'a number'}") from None
 
 
 def _ply_binary(body: bytes, elements: list, order: str) -> dict:

@@ -117,18 +117,26 @@ def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
 
 
 @nb.njit(cache=True)
+def edge_bucket_starts(faces, n_vertices):
+    """Bucket starts (V + 1,) of a counting sort of the edge occurrences of triangles (F, 3) by
+    their smaller vertex: those with smaller vertex a take slots start[a] .. start[a + 1] - 1."""
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    for f in range(faces.shape[0]):
+        for j in range(3):
+            start[min(faces[f, j], faces[f, (j + 1) % 3]) + 1] += 1
+    for v in range(n_vertices):
+        start[v + 1] += start[v]
+    return start
+
+
+@nb.njit(cache=True)
 def edge_multiplicities(faces, n_vertices):
     """Per distinct edge of triangles (F, 3): how many faces hold it (E,) and how many of
     them run it from its smaller to its larger vertex (E,); and the number of vertices used.
     A closed oriented 2-manifold has every edge at (2, 1).  Edges are bucketed by their
     smaller vertex (a counting sort, as in match_faces)."""
     nf = faces.shape[0]
-    start = np.zeros(n_vertices + 1, dtype=np.int64)
-    for f in range(nf):
-        for j in range(3):
-            start[min(faces[f, j], faces[f, (j + 1) % 3]) + 1] += 1
-    for v in range(n_vertices):
-        start[v + 1] += start[v]
+    start = edge_bucket_starts(faces, n_vertices)
     fill = start[:-1].copy()
     other = np.empty(3 * nf, dtype=np.int64)
     count = np.zeros(3 * nf, dtype=np.int64)
