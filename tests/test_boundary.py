@@ -234,3 +234,39 @@ def test_boundary_patches_is_a_function_of_the_arrays(box_mesh):
     again = boundary_patches(result.mesh.points, result.mesh.tets, result.surface)
     for name in ("faces", "tets", "tet_faces", "patches"):
         assert np.array_equal(getattr(again, name), getattr(patches, name))
+
+
+def test_write_mesh_refuses_patches_of_another_mesh_and_formats_that_drop_them(tmp_path, box_mesh):
+    result, patches = box_mesh
+    other = paroct.mesh(manifold3d.Manifold.cube([1, 2, 3]), size=0.2)
+    with pytest.raises(ParoctError, match="the patches of another mesh"):
+        write_mesh(tmp_path / "m.vtu", other.mesh.points, other.mesh.tets, boundary=patches)
+    with pytest.raises(ParoctError, match="is the name the boundary's patches are written under"):
+        write_mesh(tmp_path / "m.vtu", result.mesh.points, result.mesh.tets,
+                   {"boundary_patch": np.zeros(len(result.mesh.tets))}, boundary=patches)
+    for suffix in (".vol", ".ele", ".su2", ".dat", ".xml"):
+        with pytest.raises(ParoctError, match="hold no boundary patches here"):
+            write_mesh(tmp_path / f"m{suffix}", result.mesh.points, result.mesh.tets, boundary=patches)
+    with pytest.raises(ParoctError, match="give the BoundaryPatches of these tets"):
+        write_mesh(tmp_path / "m.vtu", result.mesh.points, result.mesh.tets, boundary={"faces": patches.faces})
+
+
+def test_gmsh_file_holds_cell_data_beside_the_patches(tmp_path, box_mesh):
+    result, patches = box_mesh
+    quality = np.linspace(0, 1, len(result.mesh.tets))
+    write_mesh(tmp_path / "m.msh", result.mesh.points, result.mesh.tets, {"quality": quality}, boundary=patches)
+    back = meshio.read(tmp_path / "m.msh")
+    assert np.array_equal(back.cell_data["quality"][0], quality)
+    assert all(not block.any() for block in back.cell_data["quality"][1:])
+
+
+def test_boundary_patches_takes_any_surface_source_and_refuses_bad_arrays(box_mesh):
+    result, patches = box_mesh
+    again = boundary_patches(result.mesh.points, result.mesh.tets, manifold3d.Manifold.cube(list(BOX)))
+    assert np.array_equal(again.patches, patches.patches)
+    for points, tets, match in ((result.mesh.points[:, :2], result.mesh.tets, r"points.shape = \(\d+, 2\)"),
+                                (result.mesh.points, result.mesh.tets[:, :3], r"tets.shape = \(\d+, 3\)"),
+                                (result.mesh.points, result.mesh.tets - 1, r"tet vertex indices span -1"),
+                                (result.mesh.points, result.mesh.tets + 0.5, "tets.dtype = float64")):
+        with pytest.raises(ParoctError, match=match):
+            boundary_patches(points, tets, result.surface)

@@ -307,3 +307,20 @@ def test_far_from_points_degenerate_inputs():
     assert np.array_equal(far_from_points(one + [[0, 0, 0.5], [0, 0, 2]], one, 1.0), [False, True])
     with pytest.raises(ValueError, match="radius"):
         far_from_points(queries, grid, 0.0)
+
+
+def test_a_mesh_of_another_solid_fails_the_check_against_the_surface():
+    """Validity alone passed a mesh of a different part: against a surface, a volume off by
+    more than half or a boundary a quarter of the diagonal away fails."""
+    import manifold3d
+
+    import paroct
+
+    small = paroct.mesh(manifold3d.Manifold.cube([1, 1, 1]), size=0.25)
+    big = load_surface(manifold3d.Manifold.cube([4, 4, 4]))
+    report = check_mesh(small.mesh.points, small.mesh.tets, big)
+    assert not report.ok and len(report.problems()) == 2
+    assert "volume differs from the solid's by -98.4%" in report.problems()[0]
+    assert "apart at" in report.problems()[1]
+    same = check_mesh(small.mesh.points, small.mesh.tets, load_surface(manifold3d.Manifold.cube([1, 1, 1])))
+    assert same.ok

@@ -95,14 +95,33 @@ def test_vtu_of_no_tets_is_a_valid_empty_grid(tmp_path):
     [
         (np.zeros((4, 2)), np.zeros((1, 4), int), None, r"points.shape = \(4, 2\)"),
         (np.zeros((4, 3)), np.zeros((1, 3), int), None, r"tets.shape = \(1, 3\)"),
-        (np.zeros((4, 3)), np.zeros((2, 4), int), {"tag": np.zeros(3)}, r"cell_data\['tag'\].shape = \(3,\), len\(tets\) = 2"),
-        (np.zeros((4, 3)), np.zeros((1, 4), int), {"name": np.array(["a"])}, "cannot write <U1 arrays"),
+        (np.zeros((4, 3)), np.zeros((1, 4)), None, r"tets.shape = \(1, 4\) \(float64\)"),
+        (np.full((4, 3), np.nan), np.zeros((1, 4), int), None, "a point coordinate is NaN or infinite"),
+        (np.zeros((4, 3)), np.zeros((2, 4), int), {"tag": np.zeros(3)}, r"cell_data\['tag'\]: shape \(3,\), float64; want"),
+        (np.zeros((4, 3)), np.zeros((1, 4), int), {"name": np.array(["a"])}, r"cell_data\['name'\]: shape \(1,\), <U1"),
+        (np.zeros((4, 3)), np.zeros((1, 4), int), {"z": np.array([1j])}, r"cell_data\['z'\]: shape \(1,\), complex128"),
+        (np.zeros((4, 3)), np.zeros((1, 4), int), [np.zeros(1)], r"cell_data = list: give a dict"),
     ],
 )
-def test_vtu_refuses_arrays_it_cannot_write(tmp_path, points, tets, cell_data, match):
-    with pytest.raises(ValueError, match=match):
-        write_mesh(tmp_path / "bad.vtu", points, tets, cell_data)
-    assert not (tmp_path / "bad.vtu").exists()
+def test_writers_refuse_arrays_they_cannot_write(tmp_path, points, tets, cell_data, match):
+    for suffix in (".vtu", ".msh", ".vtk"):
+        with pytest.raises(ParoctError, match=match):
+            write_mesh(tmp_path / f"bad{suffix}", points, tets, cell_data)
+        assert not (tmp_path / f"bad{suffix}").exists()
+
+
+def test_cell_data_round_trips_through_every_format_that_holds_it(tmp_path):
+    points, tets = _random_mesh(4, 50, 80)
+    data = {"tag": (np.arange(80) % 7).astype(np.int32), "quality": np.linspace(0, 1, 80),
+            "flag": np.arange(80) % 2 == 0, "vector": np.arange(240.0).reshape(80, 3)}
+    for suffix in (".vtu", ".vtk", ".msh"):
+        write_mesh(tmp_path / f"m{suffix}", points, tets, data)
+        back = meshio.read(tmp_path / f"m{suffix}")
+        for name, values in data.items():
+            assert np.array_equal(np.asarray(back.cell_data[name][0]).reshape(values.shape), values), (suffix, name)
+    for suffix in (".inp", ".mesh", ".vol"):
+        with pytest.raises(ParoctError, match="hold no cell data here"):
+            write_mesh(tmp_path / f"m{suffix}", points, tets, data)
 
 
 def test_write_mesh_into_a_missing_folder_is_a_clear_error(tmp_path):
@@ -137,7 +156,7 @@ def test_int_lines_match_python_formatting():
 
 def test_writers_refuse_ids_outside_the_points(tmp_path):
     for suffix in (".vtu", ".inp", ".mesh", ".msh"):
-        with pytest.raises(ValueError, match=r"vertex ids 0 \.\. 4, len\(points\) = 4"):
+        with pytest.raises(ParoctError, match=r"vertex ids 0 \.\. 4, len\(points\) = 4"):
             write_mesh(tmp_path / f"bad{suffix}", np.zeros((4, 3)), np.array([[0, 1, 2, 4]]))
 
 

@@ -85,6 +85,15 @@ def test_ply_in_every_byte_order_and_property_order(tmp_path, fmt, props, face_l
 
 
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_ply_with_elements_of_no_properties_and_end_header_in_a_comment(tmp_path, fmt):
+    data = _ply(fmt, [("x", "float"), ("y", "float"), ("z", "float")])
+    data = data.replace(b"comment made by hand\n", b"comment made by hand, up to end_header\nelement nothing 4611686018427387904\n")
+    path = tmp_path / "box.ply"
+    path.write_bytes(data)
+    assert _is_box(path)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 def test_ply_with_mixed_polygons(tmp_path, fmt):
     faces = [[0, 3, 2, 1], [4, 5, 6], [4, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
     path = tmp_path / "box.ply"
@@ -124,23 +133,33 @@ def test_ascii_stl_as_editors_save_it(tmp_path, encode):
     assert _is_box(path)
 
 
+def _head(fmt: str, n_faces: int, count: str = "uchar") -> bytes:
+    """The header of a PLY of three vertices and n_faces faces."""
+    return (f"ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            f"element face {n_faces}\nproperty list {count} int vertex_indices\nend_header\n").encode()
+
+
 @pytest.mark.parametrize("name, content, match", [
     ("x.obj", b"f 1 2 3\n", r"a face refers to vertex 3 \(counting from 1\), but there are 0 vertices"),
     ("x.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", r"line 4 reads 'f 0 1 2': vertex indices count from 1"),
     ("x.obj", b"v 0 0 0\nv 1 0 0\nf 1 2\n", r"line 3 reads 'f 1 2': a face needs at least 3 corners"),
     ("x.obj", b"v 0 0 zero\n", r"a vertex coordinate 'zero' is not a number"),
     ("x.ply", b"ply\nformat ascii 1.0\nend_header\n", r"expected 'vertex' and 'face' elements, the header declares none"),
-    ("x.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-              b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",
-     r"the header says 3 vertex elements, the file ends before them"),
-    ("x.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-              b"property float z\nelement face 2000000000\nproperty list uchar int vertex_indices\nend_header\n"
-              + bytes(36 + 13), r"the header says 2000000000 face elements, at least 2000000000 bytes, but 13 are left"),
+    ("x.ply", _head("ascii", 1) + b"0 0 0\n1 0 0\n", r"the header says 3 vertex elements, the file ends before them"),
+    ("x.ply", _head("binary_little_endian", 2000000000) + bytes(36 + 13),
+     r"the header says 2000000000 face elements, at least 2000000000 bytes, but 13 are left"),
     ("x.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty quad x\nend_header\n",
      r"header line 'property quad x' is not PLY"),
     ("x.off", b"OFF\n0 0 0\n", r"empty surface \(len\(vertices\) = 0, len\(faces\) = 0\)"),
     ("x.stl", b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n",
      r"1 'facet', 0 'endfacet' and 2 'vertex' keywords"),
+    ("x.stl", b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 " + b"9" * 100000 + b"x\nvertex 1 0 0\n"
+              b"vertex 0 1 0\nendloop\nendfacet\nendsolid\n", r"a vertex coordinate '9+x' is not a number"),
+    ("x.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 3 99999999999999999999\n", r"line 4 reads .*: a corner is not a vertex index"),
+    ("x.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 2 99999999999999999999\n", r"a face line reads .*: vertex 99999999999999999999 of 3"),
+    ("x.ply", _head("ascii", 1) + b"0 0 0\n1 0 0\n0 1 0\n-1 0 1 2\n", r"a face list of -1 items"),
+    ("x.ply", _head("binary_little_endian", 1, "uint") + bytes(36) + b"\xff\xff\xff\xff" + bytes(12),
+     r"a face list of 4294967295 items runs past the end of the file"),
 ])
 def test_malformed_files_are_refused_saying_why(tmp_path, name, content, match):
     path = tmp_path / name
@@ -205,6 +224,43 @@ def test_meshing_and_checking_do_not_depend_on_the_scale():
         assert checked.ok and checked.min_dihedral == pytest.approx(ref_check.min_dihedral, abs=1e-9)
         assert checked.hausdorff == pytest.approx(ref_check.hausdorff, rel=1e-9)
         assert checked.volume_error == pytest.approx(ref_check.volume_error, abs=1e-12)
+
+
+def test_a_polygon_of_millions_of_corners_is_refused_at_once(tmp_path):
+    """A fuzzed OBJ face of 600 k corners: 200 k copies of one triangle, a vertex of 600 k faces
+    (link_fans compared every pair of a vertex's faces: minutes)."""
+    path = tmp_path / "fan.obj"
+    path.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf " + b"1 2 3 " * 200_000 + b"\n")
+    with pytest.raises(ParoctError, match="non-manifold surface, 3 edges shared by more than two triangles"):
+        load_surface(path)
+
+
+def test_a_vertex_of_many_faces_has_its_fans_counted_right():
+    """A double cone of 300 triangles a side: its apexes have degree 300, above the pairwise
+    scan's limit, and the fans by sort agree with the reference."""
+    from paroct.topology import vertex_fans
+
+    from . import naive
+
+    n = 300
+    ring = np.c_[np.cos(np.arange(n) * 2 * np.pi / n), np.sin(np.arange(n) * 2 * np.pi / n), np.zeros(n)]
+    vertices = np.vstack([[0, 0, 1], [0, 0, -1], ring])
+    faces = np.array([[0, 2 + i, 2 + (i + 1) % n] for i in range(n)] + [[1, 2 + (i + 1) % n, 2 + i] for i in range(n)])
+    assert np.all(vertex_fans(faces, len(vertices)) == 1)
+    pinched = np.vstack([faces, faces[:n] + [0, 0, 0]])  # every upper triangle twice: no fans at the apex
+    assert np.array_equal(vertex_fans(pinched, len(vertices)) < 0, naive.nonmanifold_vertices(pinched, len(vertices)))
+    assert load_surface((vertices, faces)).volume == pytest.approx(2 * np.pi / 3, rel=1e-3)
+
+
+def test_a_part_of_1e_90_is_measured_and_meshed():
+    """Its area's squared cross products underflowed to 0 (then a division by it)."""
+    import manifold3d
+
+    sphere = load_surface(manifold3d.Manifold.sphere(1.0, 32))
+    tiny = load_surface((sphere.vertices * 1e-90, sphere.faces))
+    assert tiny.area == pytest.approx(sphere.area * 1e-180, rel=1e-12)
+    assert tiny.volume == pytest.approx(sphere.volume * 1e-270, rel=1e-12)
+    assert paroct.mesh(tiny, divisions=12).report.n_tets == paroct.mesh(sphere, divisions=12).report.n_tets
 
 
 def test_a_part_too_small_for_its_coordinates_is_refused():

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .check import nearest_triangles
+from .check import nearest_triangles, validated_mesh
 from .errors import ParoctError
 from .features import face_normals
-from .surface import Surface
+from .surface import Surface, SurfaceSource, load_surface
 from .topology import TET_FACES, edge_bucket_starts, match_faces, union
 
 #: Default feature angle, degrees: edges where the surface turns by more bound patches.
@@ -49,12 +49,17 @@ class BoundaryPatches:
     feature_angle: float
 
     def __post_init__(self):
-        b = self.faces.shape[0]
+        for name, dtype in (("faces", np.int32), ("tets", np.int64), ("tet_faces", np.int8), ("patches", np.int32)):
+            try:
+                object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=dtype))
+            except (TypeError, ValueError, OverflowError) as exc:
+                raise ParoctError(f"BoundaryPatches.{name}: not an array of integers ({exc})") from None
+        b = self.faces.shape[0] if self.faces.ndim else -1
         if self.faces.shape != (b, 3) or any(a.shape != (b,) for a in (self.tets, self.tet_faces, self.patches)):
-            raise ValueError(f"faces.shape = {self.faces.shape}, tets.shape = {self.tets.shape}, tet_faces.shape = "
-                             f"{self.tet_faces.shape}, patches.shape = {self.patches.shape}; want (B, 3) and (B,)")
+            raise ParoctError(f"faces.shape = {self.faces.shape}, tets.shape = {self.tets.shape}, tet_faces.shape = "
+                              f"{self.tet_faces.shape}, patches.shape = {self.patches.shape}; want (B, 3) and (B,)")
         if b and (self.patches.min() < 1 or self.patches.max() > self.n_patches):
-            raise ValueError(f"patches span {self.patches.min()} .. {self.patches.max()}, n_patches = {self.n_patches}")
+            raise ParoctError(f"patches span {self.patches.min()} .. {self.patches.max()}, n_patches = {self.n_patches}")
 
 
 def surface_patches(surface: Surface, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> np.ndarray:
@@ -123,17 +128,23 @@ def _patches(vertices, faces, normals, min_cos):
     return labels
 
 
-def boundary_patches(points: np.ndarray, tets: np.ndarray, surface: Surface,
+def boundary_patches(points: np.ndarray, tets: np.ndarray, surface: Surface | SurfaceSource,
                      feature_angle: float = DEFAULT_FEATURE_ANGLE) -> BoundaryPatches:
     """The boundary triangles of the tet mesh (points (N, 3) float64, tets (M, 4) positively
-    oriented) tagged with the patches (surface_patches) of the surface it fills: each takes
-    the patch of the surface triangle nearest its centroid."""
+    oriented) tagged with the patches (surface_patches) of the surface it fills (a Surface or
+    anything load_surface takes): each takes the patch of the surface triangle nearest its
+    centroid.  ParoctError for malformed arrays (check.check_mesh's rules) or surface."""
+    points, tets = validated_mesh(points, tets)
+    return _tagged_boundary(points, tets, load_surface(surface), feature_angle)
+
+
+def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, feature_angle: float) -> BoundaryPatches:
+    """boundary_patches over arrays known good (a mesh paroct made: points float64, tets int)."""
     labels = surface_patches(surface, feature_angle)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     neighbour = match_faces(tets)[0]
     owner, face = np.nonzero(neighbour < 0)
     faces = tets[owner[:, None], TET_FACES[face]]
-    points = np.asarray(points, dtype=np.float64)
     if faces.shape[0]:
         centroids = (points[faces[:, 0]] + points[faces[:, 1]] + points[faces[:, 2]]) / 3
         nearest = nearest_triangles(centroids, surface.vertices, surface.faces)[1]

@@ -301,6 +301,14 @@ def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int 
     return np.concatenate(parts)
 
 
+#: Against a surface, a mesh whose volume is off the solid's by more than this fraction, or
+#: whose boundary is farther from the surface (either way) than this fraction of the diagonal,
+#: fails: it is not a mesh of that solid.  mesh() refuses to return less than half the
+#: volume; its meshes keep within 1 % unless they warn, and within 0.05 x the diagonal.
+VOLUME_ERROR_LIMIT = 0.5
+HAUSDORFF_LIMIT = 0.25
+
+
 @dataclass(frozen=True)
 class CheckReport:
     """Findings of check_mesh.  Lengths and volumes in model units, angles in degrees.
@@ -381,6 +389,15 @@ class CheckReport:
         if self.boundary_bad_vertices:
             out.append(f"boundary not manifold: at {self.boundary_bad_vertices} vertices the boundary triangles "
                        "do not form one closed fan")
+        err = self.volume_error
+        if err is not None and not abs(err) <= VOLUME_ERROR_LIMIT:
+            out.append(f"the mesh's volume differs from the solid's by {100 * err:+.3g}% (more than "
+                       f"{100 * VOLUME_ERROR_LIMIT:g}%): not a mesh of this solid?")
+        if self.hausdorff is not None and not self.hausdorff <= HAUSDORFF_LIMIT:
+            x, y, z = self.hausdorff_at
+            out.append(f"the mesh's boundary and the surface are {self.hausdorff:.3g} x the diagonal apart at "
+                       f"({x:.6g}, {y:.6g}, {z:.6g}) (more than {HAUSDORFF_LIMIT:g}): not a mesh of this surface, or "
+                       "part of it missing?")
         if self.surface_crossings:
             x, y, z = self.crossing_at
             out.append(f"the surface intersects itself: {self.surface_crossings} of its triangles cross others, one "
@@ -411,11 +428,15 @@ class CheckReport:
         return "\n".join(lines)
 
 
-def _validate(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    points = np.asarray(points)
-    tets = np.asarray(tets)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ParoctError(f"points.shape = {points.shape}, expected (N, 3)")
+def validated_mesh(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """points (N, 3) float64 and tets (M, 4) int64 as contiguous arrays, or ParoctError for
+    wrong shapes or types, indices out of range and NaN coordinates on tet vertices."""
+    try:
+        points, tets = np.asarray(points), np.asarray(tets)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise ParoctError(f"points and tets must be (N, 3) and (M, 4) arrays ({exc})") from None
+    if points.ndim != 2 or points.shape[1] != 3 or points.dtype.kind not in "iuf":
+        raise ParoctError(f"points.shape = {points.shape} ({points.dtype}), expected (N, 3) numbers")
     if tets.ndim != 2 or tets.shape[1] != 4:
         raise ParoctError(f"tets.shape = {tets.shape}, expected (M, 4)")
     if tets.size and not np.issubdtype(tets.dtype, np.integer):
@@ -447,7 +468,7 @@ def check_mesh(
     triangle drawn with ``seed``).  Raises ParoctError for malformed arrays (wrong shapes,
     indices out of range, NaN coordinates on tet vertices).
     """
-    points, tets = _validate(points, tets)
+    points, tets = validated_mesh(points, tets)
     # Measured at a power-of-two scale (exact) that keeps squared areas of parts 1e-100 or
     # 1e100 across in range; volumes are scaled back.
     points, scale = unit_scaled(points)

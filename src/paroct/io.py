@@ -66,31 +66,66 @@ def write_mesh(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, ce
                boundary: BoundaryPatches | None = None) -> None:
     """Write a tet mesh; the format follows the extension (binary where the format allows).
 
-    points: (N, 3) float64; tets: (M, 4) integer ids into points; cell_data: name -> (M,)
-    array (ValueError, with the shapes, for anything else).  boundary: the boundary
-    triangles tagged by patch (paroct.boundary_patches), written after the tets: in Gmsh
-    .msh as physical groups ``patch_<p>`` (dimension 2, tag p) beside ``solid`` (3, 1); in
-    Abaqus .inp as element-face surfaces and node sets ``PATCH_<p>``; in Medit .mesh as
-    triangles with reference p; elsewhere as triangle cells with the cell data
-    ``boundary_patch`` (p, and 0 on the tets), cell_data arrays padded with zeros there.
-    The same arrays always give the same bytes.
+    points: (N, 3) finite float64; tets: (M, 4) integer ids into points; cell_data: name ->
+    (M,) or (M, K) array of integers or floats (bools are written as 0 and 1), in .vtu, .vtk,
+    .msh and .xdmf.  boundary: the boundary triangles of these tets tagged by patch
+    (paroct.boundary_patches), written after the tets: in Gmsh .msh as physical groups
+    ``patch_<p>`` (dimension 2, tag p) beside ``solid`` (3, 1); in Abaqus .inp as
+    element-face surfaces and node sets ``PATCH_<p>``; in Medit .mesh as triangles with
+    reference p; in .vtu and .vtk as triangle cells with the cell data ``boundary_patch``
+    (p, and 0 on the tets), cell_data arrays padded with zeros there.  ParoctError, stating
+    the shapes or the kinds, for anything else.  The same arrays always give the same bytes.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ParoctError(f"path = {path!r}: give a file name (str or pathlib.Path)")
     path = Path(path)
     fmt, options = output_format(path)
     if path.parent and not path.parent.exists():
         raise ParoctError(f"{path}: folder {path.parent} does not exist")
     points, tets, cell_data = _checked(points, tets, cell_data)
+    if cell_data and fmt not in _CELL_DATA_FORMATS:
+        raise ParoctError(f"{path}: {fmt} files hold no cell data here; write .vtu, .vtk, .msh or .xdmf")
+    if boundary is not None:
+        _check_boundary(boundary, points, tets, cell_data)
+        if fmt not in _BOUNDARY_FORMATS:
+            raise ParoctError(f"{path}: {fmt} files hold no boundary patches here; write .msh, .inp, .mesh, .vtu or .vtk")
     try:
         if fmt == "vtu":
             _write_vtu(path, points, tets, *_with_triangles(tets, cell_data, boundary))
-        elif fmt == "gmsh" and not cell_data:
-            _write_gmsh(path, points, tets, boundary)
-        elif fmt in _TEXT_WRITERS and not cell_data:  # with cell data, meshio's writer keeps what the format can
+        elif fmt == "gmsh":
+            _write_gmsh(path, points, tets, boundary, cell_data)
+        elif fmt in _TEXT_WRITERS:
             _TEXT_WRITERS[fmt](path, points, tets, boundary)
         else:
             _write_with_meshio(path, fmt, options, points, tets, *_with_triangles(tets, cell_data, boundary))
     except OSError as exc:
         raise ParoctError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+#: Formats whose files keep cell data and boundary patches as write_mesh writes them (each
+#: read back by a test; meshio's Tecplot, FLAC3D, SU2, DOLFIN and TetGen writers drop the
+#: triangles or write files that do not read back).
+_CELL_DATA_FORMATS = {"vtu", "vtk", "gmsh", "xdmf"}
+_BOUNDARY_FORMATS = {"vtu", "vtk", "gmsh", "abaqus", "medit"}
+
+
+def _check_boundary(boundary, points: np.ndarray, tets: np.ndarray, cell_data: dict) -> None:
+    """ParoctError unless boundary is a BoundaryPatches of these tets: each triangle is face
+    tet_faces of tet tets (so its ids are points')."""
+    from .boundary import BoundaryPatches
+    from .topology import TET_FACES
+
+    if not isinstance(boundary, BoundaryPatches):
+        raise ParoctError(f"boundary = {type(boundary).__name__}: give the BoundaryPatches of these tets "
+                          "(result.boundary_patches())")
+    if "boundary_patch" in cell_data:
+        raise ParoctError("cell_data['boundary_patch'] is the name the boundary's patches are written under; rename it")
+    owner, face = boundary.tets, boundary.tet_faces
+    if len(owner) and (owner.min() < 0 or owner.max() >= len(tets) or face.min() < 0 or face.max() > 3):
+        raise ParoctError(f"boundary: its triangles name tets {owner.min()} .. {owner.max()} and faces {face.min()} .. "
+                          f"{face.max()}, but len(tets) = {len(tets)}: the patches of another mesh?")
+    if not np.array_equal(tets[owner[:, None], TET_FACES[face]], boundary.faces):
+        raise ParoctError("boundary: its triangles are not the faces of these tets it names: the patches of another mesh?")
 
 
 def _with_triangles(tets: np.ndarray, cell_data: dict, boundary: BoundaryPatches | None) -> tuple[np.ndarray | None, dict]:
@@ -110,9 +145,11 @@ def _write_with_meshio(path: Path, fmt: str, options: dict, points: np.ndarray, 
 
     blocks = [("tetra", tets.astype(np.int64))]
     data = {name: [values] for name, values in cell_data.items()}
-    if triangles is not None:
+    if triangles is not None and len(triangles):  # meshio's VTK writer fails on an empty block
         blocks.append(("triangle", triangles.astype(np.int64)))
         data = {name: [values[:len(tets)], values[len(tets):]] for name, values in cell_data.items()}
+    elif triangles is not None:
+        data = {name: [values[:len(tets)]] for name, values in cell_data.items()}
     printed = io.StringIO()
     try:
         with contextlib.redirect_stdout(printed):  # some writers print their warnings
@@ -125,20 +162,36 @@ def _write_with_meshio(path: Path, fmt: str, options: dict, points: np.ndarray, 
 
 
 def _checked(points, tets, cell_data: dict | None) -> tuple[np.ndarray, np.ndarray, dict]:
-    """points as (N, 3) float64, tets (M, 4) integer ids into them and cell_data name -> (M, ...)
-    arrays, or ValueError stating the shapes."""
-    points = np.asarray(points, dtype=np.float64)
-    tets = np.asarray(tets)
+    """points as (N, 3) finite float64, tets (M, 4) integer ids into them and cell_data name ->
+    (M,) or (M, K) arrays of integers or floats (bools as uint8, float16 as float32), or
+    ParoctError stating the shapes or kinds."""
+    try:
+        points = np.asarray(points, dtype=np.float64)
+        tets = np.asarray(tets)
+    except (TypeError, ValueError) as exc:
+        raise ParoctError(f"points and tets must be (N, 3) and (M, 4) arrays ({exc})") from None
     if points.ndim != 2 or points.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or tets.dtype.kind not in "iu":
-        raise ValueError(f"points.shape = {points.shape}, tets.shape = {tets.shape} ({tets.dtype}); "
-                         "want (N, 3) and (M, 4) integer")
+        raise ParoctError(f"points.shape = {points.shape}, tets.shape = {tets.shape} ({tets.dtype}); "
+                          "want (N, 3) and (M, 4) integer")
     if tets.size and (tets.min() < 0 or tets.max() >= len(points)):
-        raise ValueError(f"tets hold vertex ids {tets.min()} .. {tets.max()}, len(points) = {len(points)}")
-    cell_data = {name: np.asarray(values) for name, values in (cell_data or {}).items()}
-    for name, values in cell_data.items():
-        if values.shape[:1] != (len(tets),):
-            raise ValueError(f"cell_data[{name!r}].shape = {values.shape}, len(tets) = {len(tets)}")
-    return points, tets, cell_data
+        raise ParoctError(f"tets hold vertex ids {tets.min()} .. {tets.max()}, len(points) = {len(points)}")
+    if not np.all(np.isfinite(points)):
+        raise ParoctError("a point coordinate is NaN or infinite")
+    if cell_data is not None and not isinstance(cell_data, dict):
+        raise ParoctError(f"cell_data = {type(cell_data).__name__}: give a dict of name -> (M,) array")
+    checked = {}
+    for name, values in (cell_data or {}).items():
+        values = np.asarray(values)
+        if values.dtype == np.bool_:
+            values = values.astype(np.uint8)
+        elif values.dtype == np.float16:
+            values = values.astype(np.float32)
+        if not isinstance(name, str) or values.dtype.kind not in "iuf" or values.ndim not in (1, 2) \
+                or values.shape[0] != len(tets):
+            raise ParoctError(f"cell_data[{name!r}]: shape {values.shape}, {values.dtype}; want (M,) or (M, K) "
+                              f"integers or floats, M = len(tets) = {len(tets)}")
+        checked[name] = values
+    return points, tets, checked
 
 
 #: VTK cell types of a linear tetrahedron and triangle.
@@ -283,12 +336,14 @@ def _write_medit(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Bou
         out.write(b"End\n")
 
 
-def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: BoundaryPatches | None = None) -> None:
+def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: BoundaryPatches | None = None,
+                cell_data: dict | None = None) -> None:
     """Gmsh MSH 4.1, binary: the tets as volume entity 1 in the physical group ``solid`` (3, 1);
     with a boundary, each patch p as surface entity p in the physical group ``patch_<p>``
     (2, p), its triangles after the tets, patch by patch.  Node and element tags from 1, in
     array order; the nodes are one block of the volume (Gmsh finds a group's nodes through its
-    elements, and readers that number points by block, as meshio does, keep the order)."""
+    elements, and readers that number points by block, as meshio does, keep the order).  Each
+    cell_data array is an $ElementData block over every element (0 on the triangles), as doubles."""
     n_patches = 0 if boundary is None else boundary.n_patches
     size_t, c_int = np.dtype("<u8"), np.dtype("<i4")
 
@@ -332,6 +387,14 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
             out.write(table)
             tag += len(rows)
         out.write(b"\n$EndElements\n")
+        for name, values in (cell_data or {}).items():
+            columns = values.reshape(len(tets), -1)
+            rows = np.zeros(n_elements, dtype=[("tag", c_int), ("values", "<f8", (columns.shape[1],))])
+            rows["tag"] = np.arange(1, n_elements + 1)
+            rows["values"][:len(tets)] = columns
+            out.write(f'$ElementData\n1\n"{name}"\n1\n0.0\n3\n0\n{columns.shape[1]}\n{n_elements}\n'.encode())
+            out.write(rows)
+            out.write(b"\n$EndElementData\n")
 
 
 #: Gmsh element types of a 4-node tetrahedron and a 3-node triangle.

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from . import rays
-from .boundary import DEFAULT_FEATURE_ANGLE, BoundaryPatches, boundary_patches
+from .boundary import DEFAULT_FEATURE_ANGLE, BoundaryPatches, _tagged_boundary
 from .check import far_from_points, triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
@@ -123,7 +123,7 @@ class MeshResult:
         if self.surface is None:
             raise ParoctError("this result has no surface to take the patches from; call "
                               "paroct.boundary_patches(points, tets, surface) instead")
-        return boundary_patches(self.mesh.points, self.mesh.tets, self.surface, feature_angle)
+        return _tagged_boundary(self.mesh.points, self.mesh.tets, self.surface, feature_angle)
 
 
 def estimate_tets(surface: Surface, field: SizeField) -> int:

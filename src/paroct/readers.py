@@ -11,6 +11,7 @@ minutes.  Nothing here trusts a count in a header before checking it against the
 from __future__ import annotations
 
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -135,15 +136,14 @@ def _read_ascii_stl(text: str) -> tuple[np.ndarray, np.ndarray]:
     fast = _ascii_stl_facets(tokens)
     if fast is not None:
         return fast
-    words = np.array(tokens) if tokens else np.zeros(0, dtype="<U1")
-    at = np.flatnonzero(words == "vertex")
-    n_facets = int(np.count_nonzero(words == "facet"))
-    if n_facets != int(np.count_nonzero(words == "endfacet")) or at.size != 3 * n_facets:
-        raise _Malformed(f"{n_facets} 'facet', {int(np.count_nonzero(words == 'endfacet'))} 'endfacet' and "
-                         f"{at.size} 'vertex' keywords: expected 3 vertices in every facet (truncated?)")
-    if at.size and at[-1] + 3 >= len(tokens):
+    at = [i for i, word in enumerate(tokens) if word == "vertex"]  # a list: one long word made numpy's
+    n_facets, n_ends = tokens.count("facet"), tokens.count("endfacet")  # fixed-width array 200 GiB
+    if n_facets != n_ends or len(at) != 3 * n_facets:
+        raise _Malformed(f"{n_facets} 'facet', {n_ends} 'endfacet' and {len(at)} 'vertex' keywords: expected 3 "
+                         "vertices in every facet (truncated?)")
+    if at and at[-1] + 3 >= len(tokens):
         raise _Malformed("the last vertex has fewer than 3 coordinates (truncated?)")
-    coords = [tokens[i + k] for i in at.tolist() for k in (1, 2, 3)]
+    coords = [tokens[i + k] for i in at for k in (1, 2, 3)]
     corners = _numbers(coords, np.float64, "a vertex coordinate").reshape(-1, 3)
     return corners, np.arange(corners.shape[0], dtype=np.int64).reshape(-1, 3)
 
@@ -194,6 +194,8 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             seen = len(coords) // 3
             try:
                 ids = [int(w.split("/", 1)[0]) for w in words[1:]]
+                if max(map(abs, ids)) > len(coords) // 3 + 2**31:  # nothing a file can index
+                    raise ValueError
             except ValueError:
                 raise _Malformed(f"line {number} reads {line.strip()!r}: a corner is not a vertex index") from None
             if 0 in ids:
@@ -218,7 +220,7 @@ def _obj_triangles(lines: list) -> tuple[np.ndarray, np.ndarray] | None:
     try:
         coords = np.array(" ".join(v_lines).split()).reshape(len(v_lines), 4)[:, 1:].astype(np.float64)
         faces = np.array(faces_text.split()).reshape(len(f_lines), 4)[:, 1:].astype(np.int64) - 1
-    except ValueError:  # other counts than 3 on a line, or a word that is not a number
+    except (ValueError, OverflowError):  # other counts than 3 on a line, or a word that is not a number
         return None
     return (coords, faces) if faces.size and faces.min() >= 0 else None  # index 0: the slow path says where
 
@@ -257,6 +259,8 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         try:
             n = int(words[0])
             ids = [int(w) for w in words[1:n + 1]]
+            if ids and max(map(abs, ids)) > n_vertices:
+                raise _Malformed(f"a face line reads {' '.join(words)!r}: vertex {max(map(abs, ids))} of {n_vertices}")
         except ValueError:
             n, ids = -1, []
         if n < 3 or len(ids) < n:
@@ -290,7 +294,7 @@ def _off_triangles(text: str) -> tuple[np.ndarray, np.ndarray] | None:
     try:
         vertices = np.array(tokens[:3 * n_vertices], dtype=np.float64).reshape(n_vertices, 3)
         faces = np.array(tokens[3 * n_vertices:], dtype=np.int64).reshape(n_faces, 4)
-    except ValueError:
+    except (ValueError, OverflowError):
         return None
     if n_faces == 0 or not np.all(faces[:, 0] == 3):
         return None
@@ -308,9 +312,10 @@ def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     """PLY, ASCII or binary (either byte order): the ``vertex`` element's x, y, z (in any
     order among other properties) and the ``face`` element's vertex list (``vertex_indices``
     or ``vertex_index``, or its only list), polygons split into fans; other elements skipped."""
-    end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
+    match = re.search(rb"^end_header[ \t\r]*$", data[:1 << 20], re.MULTILINE)  # a line of its own, not a comment's word
+    if not data.startswith(b"ply") or match is None:
         raise _Malformed("expected a header from 'ply' to 'end_header'")
+    end = match.start()
     body_start = data.find(b"\n", end) + 1 or len(data)
     elements, fmt = [], None  # elements: [name, count, [(name, dtype) or (name, count dtype, item dtype)]]
     for line in _text(data[:end]).splitlines()[1:]:
@@ -369,6 +374,9 @@ def _ply_ascii(body: bytes, elements: list, fmt: str) -> dict:
     tokens = _text(body).split()
     pos, out = 0, {}
     for name, count, props in elements:
+        if not props:  # an element of no properties holds no values
+            out[name] = []
+            continue
         if all(len(p) == 2 for p in props):
             width = len(props)
             if pos + count * width > len(tokens):
@@ -379,7 +387,7 @@ def _ply_ascii(body: bytes, elements: list, fmt: str) -> dict:
             continue
         if len(props) == 1 and count:  # the common face element: try every row holding the same count
             n = _int_token(tokens, pos, name)
-            if pos + count * (n + 1) <= len(tokens):
+            if n >= 0 and pos + count * (n + 1) <= len(tokens):
                 rows = _numbers(tokens[pos:pos + count * (n + 1)], np.float64, f"a {name} value").reshape(count, n + 1)
                 if np.all(rows[:, 0] == n):
                     out[name] = [rows[:, 1:].astype(np.int64)]
@@ -425,6 +433,9 @@ def _ply_binary(body: bytes, elements: list, order: str) -> dict:
     array after its size is checked against the bytes left; others row by row."""
     pos, out = 0, {}
     for name, count, props in elements:
+        if not props:  # an element of no properties holds no bytes
+            out[name] = []
+            continue
         first = []  # the record layout if every list holds what the first row's does
         at = pos
         for prop in props:
@@ -433,10 +444,11 @@ def _ply_binary(body: bytes, elements: list, order: str) -> dict:
                 at += np.dtype(prop[1]).itemsize
             else:
                 size = np.dtype(prop[1]).itemsize
-                if count == 0 or at + size > len(body):
-                    n = 0
-                else:
+                n = 0
+                if count and at + size <= len(body):
                     n = int(np.frombuffer(body, dtype=order + prop[1], count=1, offset=at)[0])
+                    if n < 0 or at + size + n * np.dtype(prop[2]).itemsize > len(body):
+                        n = 0  # no such row fits: the row-by-row path says where the file ends
                 first += [(prop[0] + "#n", order + prop[1]), (prop[0], order + prop[2], (max(n, 0),))]
                 at += size + max(n, 0) * np.dtype(prop[2]).itemsize
         record = np.dtype(first)

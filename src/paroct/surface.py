@@ -11,6 +11,7 @@ they are closed and consistently oriented (outward normals, positive volume).
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Union
@@ -319,23 +320,25 @@ def _shells(start, face_of, nxt, following):
 
 
 @nb.njit(cache=True)
-def _volume_area(vertices, faces):
+def _volume_area(vertices, faces, scale):
     """Enclosed volume (signed: positive for outward faces) and area of a closed surface,
-    summed about its first vertex (small numbers where the surface lies far from the origin)."""
+    summed about its first vertex (small numbers where the surface lies far from the origin),
+    over coordinates times ``scale``, a power of two (exact) that brings the part near unit
+    size: a squared cross product underflowed for parts of 1e-90, overflowed at 1e80."""
     ox, oy, oz = vertices[0, 0], vertices[0, 1], vertices[0, 2]
     volume = 0.0
     area = 0.0
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        ax, ay, az = vertices[a, 0] - ox, vertices[a, 1] - oy, vertices[a, 2] - oz
-        ux, uy, uz = vertices[b, 0] - ox - ax, vertices[b, 1] - oy - ay, vertices[b, 2] - oz - az
-        wx, wy, wz = vertices[c, 0] - ox - ax, vertices[c, 1] - oy - ay, vertices[c, 2] - oz - az
+        ax, ay, az = (vertices[a, 0] - ox) * scale, (vertices[a, 1] - oy) * scale, (vertices[a, 2] - oz) * scale
+        ux, uy, uz = (vertices[b, 0] - ox) * scale - ax, (vertices[b, 1] - oy) * scale - ay, (vertices[b, 2] - oz) * scale - az
+        wx, wy, wz = (vertices[c, 0] - ox) * scale - ax, (vertices[c, 1] - oy) * scale - ay, (vertices[c, 2] - oz) * scale - az
         nx = uy * wz - uz * wy
         ny = uz * wx - ux * wz
         nz = ux * wy - uy * wx
         volume += ax * nx + ay * ny + az * nz
         area += np.sqrt(nx * nx + ny * ny + nz * nz)
-    return volume / 6.0, area / 2.0
+    return volume / 6.0 / scale / scale / scale, area / 2.0 / scale / scale
 
 
 def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -527,7 +530,8 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
     n_shells = int(shell.max()) + 1
     if n_shells == 1:
-        volume, area = _volume_area(vertices, faces)
+        lo, hi, _ = _bounding_box(vertices)
+        volume, area = _volume_area(vertices, faces, math.ldexp(1.0, -math.frexp(float((hi - lo).max()))[1]))
         if not volume > 0:
             raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")
         return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1))
