@@ -275,14 +275,26 @@ def _grid_cells(points, radius):
 
 
 @nb.njit(cache=True)
-def triangle_centres(vertices, faces):
-    """Centroids (F, 3) float64 of triangles (F, 3) over vertices (V, 3) (one pass: numpy's
-    vertices[faces].mean(axis=1) gathers an (F, 3, 3) temporary)."""
-    out = np.empty((faces.shape[0], 3))
+def long_triangle_centres(vertices, faces, min_edge):
+    """The triangles (K,) int64 of faces (F, 3) over vertices (V, 3) with an edge longer than
+    min_edge, and their centroids (K, 3) (a shorter triangle's centroid is within min_edge / sqrt(3)
+    of its vertices).  Two passes, no (F, 3, 3) gather."""
+    limit = min_edge * min_edge
+    long = np.zeros(faces.shape[0], dtype=np.bool_)
     for f in range(faces.shape[0]):
+        for j in range(3):
+            a, b = faces[f, j], faces[f, (j + 1) % 3]
+            d = 0.0
+            for i in range(3):
+                d += (vertices[b, i] - vertices[a, i]) ** 2
+            long[f] |= d > limit
+    ids = np.flatnonzero(long)
+    out = np.empty((ids.shape[0], 3))
+    for k in range(ids.shape[0]):
+        f = ids[k]
         for i in range(3):
-            out[f, i] = (vertices[faces[f, 0], i] + vertices[faces[f, 1], i] + vertices[faces[f, 2], i]) / 3.0
-    return out
+            out[k, i] = (vertices[faces[f, 0], i] + vertices[faces[f, 1], i] + vertices[faces[f, 2], i]) / 3.0
+    return ids, out
 
 
 def sample_triangles(vertices: np.ndarray, faces: np.ndarray, per_triangle: int = 3, seed: int = 0) -> np.ndarray:
