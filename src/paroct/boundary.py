@@ -61,6 +61,12 @@ class BoundaryPatches:
         if b and (self.patches.min() < 1 or self.patches.max() > self.n_patches):
             raise ParoctError(f"patches span {self.patches.min()} .. {self.patches.max()}, n_patches = {self.n_patches}")
 
+    def by_patch(self) -> list[np.ndarray]:
+        """The triangles of each patch: ids (into faces) of patch p at [p - 1], in array order;
+        one stable sort for all (a mask a patch is B x n_patches)."""
+        order = np.argsort(self.patches, kind="stable")
+        return np.split(order, np.searchsorted(self.patches[order], np.arange(2, self.n_patches + 1)))
+
 
 def surface_patches(surface: Surface, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> np.ndarray:
     """Patch id (F,) int32 of each of the surface's triangles: triangles joined across every

@@ -20,7 +20,7 @@ import numpy as np
 
 from .errors import ParoctError
 from .readers import regular_file
-from .surface import _bounding_box
+from .surface import bounding_box
 
 if TYPE_CHECKING:
     from .boundary import BoundaryPatches
@@ -294,13 +294,12 @@ def _write_abaqus(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Bo
         if boundary is None:
             return
         side = _ABAQUS_FACE[boundary.tet_faces]
-        for p in range(1, boundary.n_patches + 1):
-            on = boundary.patches == p
-            if not on.any():
+        for p, on in enumerate(boundary.by_patch(), start=1):
+            if not on.size:
                 continue
             sides = []
             for s in range(1, 5):
-                ids = np.sort(boundary.tets[on & (side == s)])
+                ids = np.sort(boundary.tets[on[side[on] == s]])
                 if ids.size:
                     out.write(f"*ELSET, ELSET=PATCH_{p}_S{s}\n".encode())
                     _write_id_lines(out, ids)
@@ -351,13 +350,9 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
         return np.asarray(values, dtype=dtype).tobytes()
 
     def box(corners: np.ndarray) -> bytes:  # a kernel: numpy's min along axis 0 took 1.5 s of 4 M tets
-        return np.concatenate(_bounding_box(corners)[:2] if len(corners) else [np.zeros(6)]).astype("<f8").tobytes()
+        return np.concatenate(bounding_box(corners)[:2] if len(corners) else [np.zeros(6)]).astype("<f8").tobytes()
 
-    by_patch, starts = np.zeros(0, dtype=np.int64), np.zeros(n_patches + 1, dtype=np.int64)
-    if boundary is not None:
-        by_patch = np.argsort(boundary.patches, kind="stable")
-        starts = np.searchsorted(boundary.patches[by_patch], np.arange(1, n_patches + 2))
-    patch_faces = [boundary.faces[by_patch[starts[p - 1]:starts[p]]] for p in range(1, n_patches + 1)]
+    patch_faces = [] if boundary is None else [boundary.faces[on] for on in boundary.by_patch()]
     with open(path, "wb") as out:
         out.write(b"$MeshFormat\n4.1 1 8\n" + ints([1]) + b"\n$EndMeshFormat\n")
         names = [(3, 1, "solid")] + [(2, p, f"patch_{p}") for p in range(1, n_patches + 1)]
