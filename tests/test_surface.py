@@ -9,7 +9,7 @@ import pytest
 
 from paroct import mesh
 from paroct.errors import ParoctError
-from paroct.surface import (_bounding_box, _shell_topology, _shells, _shells_of_one_fan_vertices, _split_touching_sheets,
+from paroct.surface import (bounding_box, _shell_topology, _shells, _shells_of_one_fan_vertices, _split_touching_sheets,
                             _weld, load_surface, surface_from_arrays)
 from paroct.topology import edge_multiplicities, link_fans, vertex_links
 
@@ -413,7 +413,7 @@ def test_fans_and_edges_of_a_surface_walked_in_many_chunks():
 def test_bounding_box_is_numpys(seed):
     rng = np.random.default_rng(seed)
     vertices = rng.normal(size=(1 + 50 * seed, 3)) * 10.0 ** rng.integers(-5, 5)
-    lo, hi, largest = _bounding_box(vertices)
+    lo, hi, largest = bounding_box(vertices)
     assert np.array_equal(lo, vertices.min(axis=0)) and np.array_equal(hi, vertices.max(axis=0))
     assert largest == np.abs(vertices).max()
 

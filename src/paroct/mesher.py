@@ -189,11 +189,11 @@ def resolve_size(surface: Surface, size: float | None, divisions: float | None) 
     if not h * 2.0**MAX_FRAME_LEVELS >= surface.diagonal:
         raise ParoctError(f"size = {h:.6g} is too small for the part: its bounding-box diagonal {surface.diagonal:.6g} "
                           f"is more than 2^{MAX_FRAME_LEVELS} sizes")
-    step = _float_step(surface)
-    if h < MIN_SIZE_STEPS * step:
-        raise ParoctError(f"size = {h:.6g} is less than {MIN_SIZE_STEPS} steps of float64 ({step:.3g} each) at the part's "
-                          f"coordinates (up to {np.abs(np.concatenate([surface.bbox_min, surface.bbox_max])).max():.6g}): "
-                          "the mesh's points could not be placed; move the part near the origin (subtract its centre)")
+    largest = _largest_coordinate(surface)
+    if h < MIN_SIZE_STEPS * np.spacing(largest):
+        raise ParoctError(f"size = {h:.6g} is less than {MIN_SIZE_STEPS} steps of float64 ({np.spacing(largest):.3g} each) "
+                          f"at the part's coordinates (up to {largest:.6g}): the mesh's points could not be placed; "
+                          "move the part near the origin (subtract its centre)")
     return h
 
 
@@ -203,9 +203,9 @@ def resolve_size(surface: Surface, size: float | None, divisions: float | None) 
 MIN_SIZE_STEPS = 256
 
 
-def _float_step(surface: Surface) -> float:
-    """The spacing of float64 values at the surface's largest coordinate magnitude."""
-    return float(np.spacing(np.abs(np.concatenate([surface.bbox_min, surface.bbox_max])).max()))
+def _largest_coordinate(surface: Surface) -> float:
+    """The surface's largest coordinate magnitude, where float64's steps are widest."""
+    return float(np.abs(np.concatenate([surface.bbox_min, surface.bbox_max])).max())
 
 
 def mesh(
@@ -254,24 +254,21 @@ def mesh(
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function)
-    field_notes = []
     floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
-    floor = min(h, max(floor, MIN_SIZE_STEPS * _float_step(surface)))  # thin walls refine no further
+    floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
     whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
     budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
     if progress is not None and not callable(progress):
         raise ParoctError(f"progress = {progress!r}: must be a function taking a stage's name, or None")
     _check_memory(surface, field, budget)
-    for region in field.regions:
-        if region.size < h:
-            kind = type(region).__name__.lower()
-            field_notes.append(f"a refinement {kind} asks for size {region.size:.4g}, below size = {h:.4g}, the finest "
-                               f"the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer")
     loaded = time.perf_counter() - t0
     if progress:
         progress("load")
 
-    band, notes, stage_seconds = h, list(field_notes), {"load": loaded}  # stage times add up over the attempts
+    notes = [f"a refinement {type(region).__name__.lower()} asks for size {region.size:.4g}, below size = {h:.4g}, "
+             f"the finest the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer"
+             for region in field.regions if region.size < h]
+    band, stage_seconds = h, {"load": loaded}  # stage times add up over the attempts
     memory_bound, tried = False, []  # tried: whole-band sizes below h that a pass lost at
     while True:
         report = _pass_report(surface, field, band, stage_seconds)

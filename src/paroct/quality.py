@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from .surface import bounding_box  # one pass: numpy's axis-0 reductions stride
+
 #: The six edges of a tet as vertex pairs, and for each the two vertices off it.
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
 
@@ -28,11 +30,9 @@ def unit_scaled(points: np.ndarray) -> tuple[np.ndarray, float]:
     for the power of two s that brings the extent into [0.5, 1): exact, so angles and 3r/R are
     those of the points as given, and volumes are s^3 times theirs.  A part of 1e-100 or
     1e100 across (the range paroct meshes) gave dihedral angles of 0 and 180 degrees unscaled."""
-    from .surface import _bounding_box  # a one-pass kernel; numpy's axis-0 reductions stride
-
     if len(points) == 0:
         return points, 1.0
-    lo, hi, _ = _bounding_box(points)
+    lo, hi, _ = bounding_box(points)
     extent = float((hi - lo).max())
     if not (math.isfinite(extent) and extent > 0) or _SAFE_EXTENT[0] <= extent <= _SAFE_EXTENT[1]:
         return points, 1.0

@@ -51,7 +51,7 @@ class Surface:
     def __post_init__(self):
         # Stages ask for the box a dozen times per mesh; a reduction over the vertices each time
         # cost small parts several per cent.
-        lo, hi, _ = _bounding_box(np.ascontiguousarray(self.vertices, dtype=np.float64))
+        lo, hi, _ = bounding_box(np.ascontiguousarray(self.vertices, dtype=np.float64))
         for name, corner in (("bbox_min", lo), ("bbox_max", hi)):
             corner.setflags(write=False)
             object.__setattr__(self, name, corner)
@@ -163,7 +163,7 @@ def _weld_kernel(vertices, bits, faces):
 
 
 @nb.njit(cache=True)
-def _bounding_box(vertices):
+def bounding_box(vertices):
     """Corners (3,) of the box of vertices (V >= 1, 3) and the largest coordinate magnitude:
     one pass (numpy's reductions along axis 0 of an (V, 3) array stride, 30 ns a vertex)."""
     lo = vertices[0].copy()
@@ -475,7 +475,7 @@ MAX_FACES = (2**31 - 1) // 3
 
 def _check_scale(vertices: np.ndarray, label: str) -> None:
     """Refuse coordinates beyond MAX_COORDINATE and parts smaller than MIN_EXTENT."""
-    lo, hi, largest = _bounding_box(vertices)
+    lo, hi, largest = bounding_box(vertices)
     if largest > MAX_COORDINATE:
         raise ParoctError(f"{label}: a vertex coordinate reaches {largest:.3g}; paroct meshes coordinates up to "
                           f"{MAX_COORDINATE:.0e} in magnitude (volumes overflow beyond): scale the part")
@@ -530,7 +530,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
     n_shells = int(shell.max()) + 1
     if n_shells == 1:
-        lo, hi, _ = _bounding_box(vertices)
+        lo, hi, _ = bounding_box(vertices)
         volume, area = _volume_area(vertices, faces, math.ldexp(1.0, -math.frexp(float((hi - lo).max()))[1]))
         if not volume > 0:
             raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")

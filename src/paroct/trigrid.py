@@ -11,7 +11,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .surface import _bounding_box
+from .surface import bounding_box
 
 #: Largest number of grid cells along one axis of the triangle search grid.
 _MAX_CELLS_PER_AXIS = 256
@@ -22,7 +22,7 @@ def triangle_grid(vertices: np.ndarray, faces: np.ndarray, extra: np.ndarray | N
     triangle per cell, at most _MAX_CELLS_PER_AXIS cells an axis: (origin (3,), cell side,
     dims (3,), start, items), the triangles whose bounding box meets cell c (row-major over
     dims) being items[start[c]:start[c + 1]].  vertices float64, faces int64, F >= 1."""
-    lo, hi, _ = _bounding_box(vertices)  # of every vertex: loaded surfaces use all theirs
+    lo, hi, _ = bounding_box(vertices)  # of every vertex: loaded surfaces use all theirs
     if extra is not None and len(extra):
         lo, hi = np.minimum(lo, extra.min(axis=0)), np.maximum(hi, extra.max(axis=0))
     extent = hi - lo
