@@ -27,7 +27,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def skfem_mesh(result: paroct.MeshResult, patches: paroct.BoundaryPatches) -> skfem.MeshTet:
-    """The mesh as a scikit-fem MeshTet whose boundaries ``patch_<p>`` are the facets of patch p."""
+    """The mesh as a scikit-fem MeshTet whose boundaries, named as the patches (``patch_<p>``, or
+    the input's group names), are the facets of each patch."""
     mesh = skfem.MeshTet(np.ascontiguousarray(result.mesh.points.T), np.ascontiguousarray(result.mesh.tets.T))
     n = mesh.p.shape[1]
 
@@ -38,7 +39,7 @@ def skfem_mesh(result: paroct.MeshResult, patches: paroct.BoundaryPatches) -> sk
     facet_keys = keys(mesh.facets.T)
     order = np.argsort(facet_keys)
     facets = order[np.searchsorted(facet_keys[order], keys(patches.faces))]
-    return mesh.with_boundaries({f"patch_{p}": facets[patches.patches == p] for p in range(1, patches.n_patches + 1)})
+    return mesh.with_boundaries({name: facets[patches.patches == p] for p, name in enumerate(patches.names, start=1)})
 
 
 def solve_heat(mesh: skfem.MeshTet, cold: str, hot: str, conductivity: float = 1.0) -> tuple[np.ndarray, float, float]:
@@ -79,9 +80,11 @@ def main(argv=None) -> int:
             print(f"heat_skfem: patch {p} has no boundary triangle; patches: {', '.join(map(str, height))}", file=sys.stderr)
             return 2
     print(f"{len(result.mesh.tets)} tets, {len(patches.faces)} boundary triangles in {patches.n_patches} patches")
-    temperature, flow_in, flow_out = solve_heat(skfem_mesh(result, patches), f"patch_{cold}", f"patch_{hot}")
-    print(f"T = 0 on patch {cold} (z ~ {height[cold]:.4g}), T = 1 on patch {hot} (z ~ {height[hot]:.4g})")
-    print(f"heat in through patch {hot}: {flow_in:.6g}, out through patch {cold}: {flow_out:.6g} (k = 1)")
+    cold_name, hot_name = patches.names[cold - 1], patches.names[hot - 1]
+    temperature, flow_in, flow_out = solve_heat(skfem_mesh(result, patches), cold_name, hot_name)
+    print(f"T = 0 on patch {cold} {cold_name!r} (z ~ {height[cold]:.4g}), T = 1 on patch {hot} {hot_name!r} "
+          f"(z ~ {height[hot]:.4g})")
+    print(f"heat in through {hot_name!r}: {flow_in:.6g}, out through {cold_name!r}: {flow_out:.6g} (k = 1)")
     print(f"temperature {temperature.min():.4g} .. {temperature.max():.4g}")
     return 0
 

@@ -463,7 +463,7 @@ def test_binary_stl_reader_matches_meshio():
     from paroct.surface import read_surface_file, surface_from_arrays
 
     path = DATA / "bunny.stl"
-    corners, soup = read_surface_file(path)
+    corners, soup = read_surface_file(path)[:2]
     assert soup.shape[0] * 3 == corners.shape[0]  # the fast path: a soup, welded later
     raw = meshio.read(path)
     ours, theirs = surface_from_arrays(corners, soup), surface_from_arrays(raw.points, raw.cells[0].data)

@@ -2,10 +2,12 @@
 triangles tagged with the patch they lie on, so that boundary conditions can be put on them
 (Gmsh physical groups, Abaqus surfaces and node sets, Medit references: see io.write_mesh).
 
-A patch is a set of surface triangles joined across edges where the surface turns by less
-than the feature angle (the angle between the two triangles' normals), the usual rule of CAD
-and of Gmsh's ``ClassifySurfaces``: a box has 6 patches, a cylinder 3 at 40 degrees.  Each
-boundary triangle of the mesh takes the patch of the input triangle nearest its centroid
+Where the input names groups of its triangles (the solids of an ASCII STL, the ``g``
+statements of an OBJ: CAD programs export faces or bodies so), the groups are the patches,
+with their names.  Otherwise, or when a feature angle is asked for, a patch is a set of
+surface triangles joined across edges where the surface turns by less than the feature
+angle (the angle between the two triangles' normals), the usual rule of CAD and of Gmsh's
+``ClassifySurfaces``: a box has 6 patches, a cylinder 3 at 40 degrees.  Each boundary triangle of the mesh takes the patch of the input triangle nearest its centroid
 (exact point-to-triangle distances, check.nearest_triangles).  Stuffing cuts sharp edges
 (by less than one size), so the tagged faces along a sharp edge split between its two
 patches where the cut falls, not on the edge itself.
@@ -38,7 +40,9 @@ class BoundaryPatches:
     of that tet it is (k: the face opposite the tet's vertex k); patches: (B,) int32 the
     patch of each triangle, 1 .. n_patches (from 1, as files number them: Gmsh's physical
     tags must be positive); n_patches: the surface's patch count (a patch too small for the
-    lattice may have no triangle); feature_angle: degrees.
+    lattice may have no triangle); feature_angle: degrees, or None where the patches are the
+    input's named groups; names: the patches' names, names[p - 1] of patch p (``patch_<p>``
+    if not given).
     """
 
     faces: np.ndarray
@@ -46,7 +50,8 @@ class BoundaryPatches:
     tet_faces: np.ndarray
     patches: np.ndarray
     n_patches: int
-    feature_angle: float
+    feature_angle: float | None
+    names: tuple[str, ...] = ()
 
     def __post_init__(self):
         for name, dtype in (("faces", np.int32), ("tets", np.int64), ("tet_faces", np.int8), ("patches", np.int32)):
@@ -60,6 +65,10 @@ class BoundaryPatches:
                               f"{self.tet_faces.shape}, patches.shape = {self.patches.shape}; want (B, 3) and (B,)")
         if b and (self.patches.min() < 1 or self.patches.max() > self.n_patches):
             raise ParoctError(f"patches span {self.patches.min()} .. {self.patches.max()}, n_patches = {self.n_patches}")
+        names = tuple(self.names) or tuple(f"patch_{p}" for p in range(1, self.n_patches + 1))
+        if len(names) != self.n_patches or not all(isinstance(name, str) for name in names):
+            raise ParoctError(f"len(names) = {len(names)}, n_patches = {self.n_patches}; want a name (str) a patch")
+        object.__setattr__(self, "names", names)
 
     def by_patch(self) -> list[np.ndarray]:
         """The triangles of each patch: ids (into faces) of patch p at [p - 1], in array order;
@@ -135,18 +144,25 @@ def _patches(vertices, faces, normals, min_cos):
 
 
 def boundary_patches(points: np.ndarray, tets: np.ndarray, surface: Surface | SurfaceSource,
-                     feature_angle: float = DEFAULT_FEATURE_ANGLE) -> BoundaryPatches:
+                     feature_angle: float | None = None) -> BoundaryPatches:
     """The boundary triangles of the tet mesh (points (N, 3) float64, tets (M, 4) positively
-    oriented) tagged with the patches (surface_patches) of the surface it fills (a Surface or
-    anything load_surface takes): each takes the patch of the surface triangle nearest its
-    centroid.  ParoctError for malformed arrays (check.check_mesh's rules) or surface."""
+    oriented) tagged with the patches of the surface it fills (a Surface or anything
+    load_surface takes): each takes the patch of the surface triangle nearest its centroid.
+    The patches are the surface's named groups (Surface.face_groups) when it has them and
+    feature_angle is None, else surface_patches at feature_angle (default
+    DEFAULT_FEATURE_ANGLE).  ParoctError for malformed arrays (check.check_mesh's rules) or
+    surface."""
     points, tets = validated_mesh(points, tets)
     return _tagged_boundary(points, tets, load_surface(surface), feature_angle)
 
 
-def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, feature_angle: float) -> BoundaryPatches:
+def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, feature_angle: float | None) -> BoundaryPatches:
     """boundary_patches over arrays known good (a mesh paroct made: points float64, tets int)."""
-    labels = surface_patches(surface, feature_angle)
+    if feature_angle is None and surface.face_groups is not None:
+        labels, names = surface.face_groups + 1, surface.group_names
+    else:
+        feature_angle = DEFAULT_FEATURE_ANGLE if feature_angle is None else feature_angle
+        labels, names = surface_patches(surface, feature_angle), ()
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     neighbour = match_faces(tets)[0]
     owner, face = np.nonzero(neighbour < 0)
@@ -157,5 +173,6 @@ def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, fea
         patches = labels[nearest]
     else:
         patches = np.zeros(0, dtype=np.int32)
-    return BoundaryPatches(faces.astype(np.int32), owner.astype(np.int64), face.astype(np.int8),
-                           patches.astype(np.int32), int(labels.max(initial=0)), float(feature_angle))
+    return BoundaryPatches(faces.astype(np.int32), owner.astype(np.int64), face.astype(np.int8), patches.astype(np.int32),
+                           len(names) or int(labels.max(initial=0)), None if feature_angle is None else float(feature_angle),
+                           names)

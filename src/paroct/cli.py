@@ -22,6 +22,12 @@ from . import __version__
 from .boundary import DEFAULT_FEATURE_ANGLE
 from .errors import ParoctError
 
+#: --patches given without an angle: the input's named groups where it has them (not a
+#: string: argparse would convert it with the option's type).
+_INPUT_GROUPS = object()
+#: Named patches listed one a line in the summary, at most.
+_LISTED_PATCHES = 20
+
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
 EXIT_USAGE = 2
@@ -84,10 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="long edge at most H in the box [X0,X1]x[Y0,Y1]x[Z0,Z1] (repeatable)")
     m.add_argument("--refine-sphere", type=float, nargs=5, action="append", default=[],
                    metavar=("X", "Y", "Z", "R", "H"), help="long edge at most H within R of (X, Y, Z) (repeatable)")
-    m.add_argument("--patches", type=float, nargs="?", const=DEFAULT_FEATURE_ANGLE, metavar="ANGLE",
-                   help="also write the boundary triangles, tagged by surface patch: the surface split at edges "
-                        f"sharper than ANGLE degrees (default {DEFAULT_FEATURE_ANGLE:g}); Gmsh physical groups in .msh, "
-                        "surfaces and node sets in .inp, references in .mesh, cell data boundary_patch elsewhere")
+    m.add_argument("--patches", type=float, nargs="?", const=_INPUT_GROUPS, metavar="ANGLE",
+                   help="also write the boundary triangles, tagged by surface patch: the input's named groups (the "
+                        "solids of an ASCII STL, an OBJ's g groups) if it has them, else the surface split at edges "
+                        f"sharper than {DEFAULT_FEATURE_ANGLE:g} degrees; with ANGLE, split at ANGLE degrees whatever "
+                        "the groups.  Gmsh physical groups in .msh, surfaces and node sets in .inp, references in "
+                        ".mesh, cell data boundary_patch elsewhere")
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
     talk = m.add_mutually_exclusive_group()
@@ -166,7 +174,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
     result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
                   thin_features=not args.keep_size, min_size=args.min_size,
                   max_memory=max_memory, progress=progress if args.verbose else None)
-    boundary = None if args.patches is None else result.boundary_patches(args.patches)
+    boundary = None if args.patches is None else result.boundary_patches(
+        None if args.patches is _INPUT_GROUPS else args.patches)
     t1 = time.perf_counter()
     write_mesh(out, result.mesh.points, result.mesh.tets, boundary=boundary)
     t2 = time.perf_counter()
@@ -204,8 +213,16 @@ def format_mesh_summary(report, out: Path | str, mesh_seconds: float, write_seco
     ]
     if boundary is not None:
         empty = boundary.n_patches - np.unique(boundary.patches).size
-        lines.append(f"boundary {len(boundary.faces)} triangles in {boundary.n_patches} patches (feature angle "
-                     f"{boundary.feature_angle:g} deg){f', {empty} of them too small for the size' if empty else ''}")
+        how = ("the input's named groups" if boundary.feature_angle is None
+               else f"feature angle {boundary.feature_angle:g} deg")
+        lines.append(f"boundary {len(boundary.faces)} triangles in {boundary.n_patches} patches ({how})"
+                     f"{f', {empty} of them too small for the size' if empty else ''}")
+        if boundary.feature_angle is None:
+            counts = np.bincount(boundary.patches, minlength=boundary.n_patches + 1)[1:]
+            lines += [f"  patch {p} {name!r}: {n} triangles"
+                      for p, (name, n) in enumerate(zip(boundary.names[:_LISTED_PATCHES], counts), start=1)]
+            if boundary.n_patches > _LISTED_PATCHES:
+                lines.append(f"  ... and {boundary.n_patches - _LISTED_PATCHES} more")
     lines += [f"note: {note}" for note in report.notes]
     if verbose:
         lines.append(f"unresolved cuts {report.unresolved_cuts}, repaired tets {report.repaired_tets}, "

@@ -9,6 +9,7 @@ import base64
 import contextlib
 import io
 import os
+import re
 import warnings
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -70,8 +71,9 @@ def write_mesh(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, ce
     (M,) or (M, K) array of integers or floats (bools are written as 0 and 1), in .vtu, .vtk,
     .msh and .xdmf.  boundary: the boundary triangles of these tets tagged by patch
     (paroct.boundary_patches), written after the tets: in Gmsh .msh as physical groups
-    ``patch_<p>`` (dimension 2, tag p) beside ``solid`` (3, 1); in Abaqus .inp as
-    element-face surfaces and node sets ``PATCH_<p>``; in Medit .mesh as triangles with
+    named as the patches (``patch_<p>`` for patches by feature angle; dimension 2, tag p)
+    beside ``solid`` (3, 1); in Abaqus .inp as element-face surfaces and node sets of those
+    names in upper case (``PATCH_<p>``); in Medit .mesh as triangles with
     reference p; in .vtu and .vtk as triangle cells with the cell data ``boundary_patch``
     (p, and 0 on the tets), cell_data arrays padded with zeros there.  ParoctError, stating
     the shapes or the kinds, for anything else.  The same arrays always give the same bytes.
@@ -283,9 +285,9 @@ _ABAQUS_IDS_PER_LINE = 16
 def _write_abaqus(path: Path, points: np.ndarray, tets: np.ndarray, boundary: BoundaryPatches | None = None) -> None:
     """Abaqus / CalculiX input of linear tets (C3D4): *NODE and *ELEMENT blocks, ids from 1,
     coordinates with 17 significant digits (they read back bit for bit).  With a boundary,
-    each patch p is an element-based *SURFACE ``PATCH_<p>`` (over element sets
-    ``PATCH_<p>_S1`` .. ``_S4`` of the tets whose face S1 .. S4 lies on it) and a node set
-    ``PATCH_<p>`` of its triangles' nodes."""
+    each patch is an element-based *SURFACE named as the patch (_abaqus_names: ``PATCH_<p>``
+    for patches by feature angle) over element sets ``<name>_S1`` .. ``_S4`` of the tets whose
+    face S1 .. S4 lies on it, and a node set of that name of its triangles' nodes."""
     with open(path, "wb") as out:
         out.write(b"*HEADING\nparoct tet mesh\n*NODE\n")
         _write_points(out, points, "%d, %.17g, %.17g, %.17g\n", with_ids=True)
@@ -294,20 +296,43 @@ def _write_abaqus(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Bo
         if boundary is None:
             return
         side = _ABAQUS_FACE[boundary.tet_faces]
-        for p, on in enumerate(boundary.by_patch(), start=1):
+        for name, on in zip(_abaqus_names(boundary.names), boundary.by_patch()):
             if not on.size:
                 continue
             sides = []
             for s in range(1, 5):
                 ids = np.sort(boundary.tets[on[side[on] == s]])
                 if ids.size:
-                    out.write(f"*ELSET, ELSET=PATCH_{p}_S{s}\n".encode())
+                    out.write(f"*ELSET, ELSET={name}_S{s}\n".encode())
                     _write_id_lines(out, ids)
                     sides.append(s)
-            out.write(f"*SURFACE, NAME=PATCH_{p}, TYPE=ELEMENT\n".encode())
-            out.write("".join(f"PATCH_{p}_S{s}, S{s}\n" for s in sides).encode())
-            out.write(f"*NSET, NSET=PATCH_{p}\n".encode())
+            out.write(f"*SURFACE, NAME={name}, TYPE=ELEMENT\n".encode())
+            out.write("".join(f"{name}_S{s}, S{s}\n" for s in sides).encode())
+            out.write(f"*NSET, NSET={name}\n".encode())
             _write_id_lines(out, np.unique(boundary.faces[on]))
+
+
+#: Abaqus names: at most 80 characters, a letter first, then letters, digits and underscores;
+#: a patch's element sets add ``_S<k>``.
+_ABAQUS_NAME_LENGTH = 80 - 3
+
+
+def _abaqus_names(names: tuple[str, ...]) -> list[str]:
+    """The patches' names as Abaqus takes them, upper case and distinct (Abaqus ignores case):
+    other characters become ``_``, a name not starting with a letter gets ``P_`` before it, a
+    long one is cut, and one already taken gets ``_<p>`` (its patch) after it."""
+    out, taken = [], set()
+    for p, name in enumerate(names, start=1):
+        name = re.sub(r"[^A-Z0-9_]", "_", name.upper())
+        name = name if name[:1].isalpha() else "P_" + name
+        name = name[:_ABAQUS_NAME_LENGTH]
+        base, k = name, 1
+        while name in taken:  # "a", "A", "A_2" -> A, A_2, A_2_3
+            tail = f"_{p}" if k == 1 else f"_{p}_{k}"
+            name, k = base[:_ABAQUS_NAME_LENGTH - len(tail)] + tail, k + 1
+        taken.add(name)
+        out.append(name)
+    return out
 
 
 def _write_id_lines(out, ids: np.ndarray) -> None:
@@ -338,8 +363,8 @@ def _write_medit(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Bou
 def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: BoundaryPatches | None = None,
                 cell_data: dict | None = None) -> None:
     """Gmsh MSH 4.1, binary: the tets as volume entity 1 in the physical group ``solid`` (3, 1);
-    with a boundary, each patch p as surface entity p in the physical group ``patch_<p>``
-    (2, p), its triangles after the tets, patch by patch.  Node and element tags from 1, in
+    with a boundary, each patch p as surface entity p in the physical group (2, p) named as the
+    patch (``patch_<p>`` for patches by feature angle), its triangles after the tets, patch by patch.  Node and element tags from 1, in
     array order; the nodes are one block of the volume (Gmsh finds a group's nodes through its
     elements, and readers that number points by block, as meshio does, keep the order).  Each
     cell_data array is an $ElementData block over every element (0 on the triangles), as doubles."""
@@ -355,7 +380,9 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
     patch_faces = [] if boundary is None else [boundary.faces[on] for on in boundary.by_patch()]
     with open(path, "wb") as out:
         out.write(b"$MeshFormat\n4.1 1 8\n" + ints([1]) + b"\n$EndMeshFormat\n")
-        names = [(3, 1, "solid")] + [(2, p, f"patch_{p}") for p in range(1, n_patches + 1)]
+        # A name is a quoted string on one line: quotes and control characters would end it.
+        names = [(3, 1, "solid")] + [(2, p, re.sub(r'["\x00-\x1f]', "_", name))
+                                     for p, name in enumerate(() if boundary is None else boundary.names, start=1)]
         out.write(f"$PhysicalNames\n{len(names)}\n".encode())
         out.write("".join(f'{dim} {tag} "{name}"\n' for dim, tag, name in names).encode() + b"$EndPhysicalNames\n")
         # Entities: surfaces (tag, box, physical tags, bounding curves), then the volume

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from . import rays
-from .boundary import DEFAULT_FEATURE_ANGLE, BoundaryPatches, _tagged_boundary
+from .boundary import BoundaryPatches, _tagged_boundary
 from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
@@ -116,10 +116,11 @@ class MeshResult:
     report: MeshReport
     surface: Surface | None = field(default=None, repr=False, compare=False)
 
-    def boundary_patches(self, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> BoundaryPatches:
+    def boundary_patches(self, feature_angle: float | None = None) -> BoundaryPatches:
         """The mesh's boundary triangles, each tagged with the patch of the surface it lies
-        on: the surface split at edges sharper than ``feature_angle`` degrees
-        (boundary.boundary_patches)."""
+        on: the input's named groups if it has them and feature_angle is None, else the
+        surface split at edges sharper than ``feature_angle`` degrees (default
+        DEFAULT_FEATURE_ANGLE; boundary.boundary_patches)."""
         if self.surface is None:
             raise ParoctError("this result has no surface to take the patches from; call "
                               "paroct.boundary_patches(points, tets, surface) instead")

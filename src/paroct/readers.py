@@ -1,7 +1,10 @@
 """Read surface files: STL (binary and ASCII), OBJ, OFF and PLY (ASCII and binary).
 
 Each reader returns vertices (V, 3) and triangles (F, 3) int64, polygons split into fans,
-or raises ParoctError saying what is wrong and where.  paroct reads these formats itself:
+and the named groups the file puts its triangles in where it has two or more (the solids
+of an ASCII STL, the ``g`` or ``o`` statements of an OBJ: CAD programs export a part's faces
+or bodies so, and they are the patches boundary conditions go on), or raises ParoctError
+saying what is wrong and where.  paroct reads these formats itself:
 meshio's readers refused valid files (OBJ with negative or ``v/vt`` indices, PLY with its
 properties in another order or its list named ``vertex_index``, OFF with quads or colours,
 STL with a byte-order mark), and walked a binary PLY whose header claimed 2e9 faces for
@@ -14,6 +17,7 @@ import os
 import re
 import stat
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -27,11 +31,22 @@ class _Malformed(Exception):
     """A reader's complaint, turned into ParoctError with the file's name and format."""
 
 
-def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) (binary STL: float32, as stored; else float64) and triangles (F, 3)
-    int64 of a surface file (STL, OBJ, OFF, PLY), polygons split into fans.  Raises
-    ParoctError for a missing or unreadable file, something that is not a regular file (a
-    folder, a pipe), an unknown extension or a malformed file."""
+class SurfaceFile(NamedTuple):
+    """What a surface file holds.  vertices: (V, 3), float32 for binary STL (as stored), else
+    float64; faces: (F, 3) int64, polygons split into fans; face_groups: (F,) int32, the group
+    0 .. G - 1 of each triangle, or None when the file names fewer than two groups;
+    group_names: the G names, in order of first appearance."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_groups: np.ndarray | None = None
+    group_names: tuple[str, ...] = ()
+
+
+def read_surface_file(path: str | os.PathLike) -> SurfaceFile:
+    """The vertices, triangles and named groups (SurfaceFile) of a surface file (STL, OBJ,
+    OFF, PLY).  Raises ParoctError for a missing or unreadable file, something that is not a
+    regular file (a folder, a pipe), an unknown extension or a malformed file."""
     path = Path(path)
     regular_file(path, "a surface file")
     ext = path.suffix.lower()
@@ -42,14 +57,14 @@ def read_surface_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     except OSError as exc:
         raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
-        vertices, faces = _READERS[ext](data)
+        vertices, faces, face_groups, group_names = SurfaceFile(*_READERS[ext](data))
     except _Malformed as exc:
         raise ParoctError(f"cannot read {path} as {ext[1:].upper()}: {exc}") from None
     if faces.size and (faces.min() < 0 or faces.max() >= vertices.shape[0]):
         bad = int(faces.min()) if faces.min() < 0 else int(faces.max())
         raise ParoctError(f"cannot read {path} as {ext[1:].upper()}: a face refers to vertex {bad + 1} "
                           f"(counting from 1), but there are {vertices.shape[0]} vertices")
-    return vertices, faces
+    return SurfaceFile(vertices, faces, face_groups, group_names)
 
 
 def regular_file(path: Path, what: str) -> None:
@@ -83,6 +98,18 @@ def _numbers(tokens, dtype, what: str) -> np.ndarray:
             except (ValueError, OverflowError):
                 raise _Malformed(f"{what} {token!r} is not {'an integer' if dtype is np.int64 else 'a number'}") from None
         raise
+
+
+def _named_groups(names: list, triangles: np.ndarray | None = None) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """(face_groups, group_names) of items named names[i], each standing for triangles[i]
+    triangles (1 each if None): groups numbered in order of first appearance, same name same
+    group; (None, ()) if fewer than two."""
+    order = dict.fromkeys(names)
+    if len(order) < 2:
+        return None, ()
+    index = {name: i for i, name in enumerate(order)}
+    groups = np.array([index[name] for name in names], dtype=np.int32)
+    return (groups if triangles is None else np.repeat(groups, triangles)), tuple(order)
 
 
 def _fans(polygons: list) -> np.ndarray:
@@ -129,10 +156,49 @@ def _looks_like_text(start: bytes) -> bool:
     return not any(b < 9 or 13 < b < 32 for b in start)
 
 
-def _read_ascii_stl(text: str) -> tuple[np.ndarray, np.ndarray]:
-    """ASCII STL: ``solid``, then facets ``facet normal ... outer loop vertex x y z (3 x)
-    endloop endfacet``, ``endsolid``; several solids one after another (keywords in any case)."""
-    tokens = text.lower().split()
+def _read_ascii_stl(text: str) -> SurfaceFile:
+    """ASCII STL: ``solid [name]``, then facets ``facet normal ... outer loop vertex x y z
+    (3 x) endloop endfacet``, ``endsolid``; several solids one after another (keywords in any
+    case), each a group named by its ``solid`` line (``solid_<k>`` if it names none)."""
+    lower = text.translate(_ASCII_LOWER)  # one character for one: positions stay those of text
+    solids = _stl_solid_lines(text, lower)
+    if len(solids) < 2:
+        return SurfaceFile(*_ascii_stl_corners(lower.split()))
+    parts = []
+    for k, (body, name) in enumerate(solids):
+        end = solids[k + 1][0] if k + 1 < len(solids) else len(lower)
+        try:
+            parts.append(_ascii_stl_corners(lower[body:end].split())[0])
+        except _Malformed as exc:
+            raise _Malformed(f"solid {k + 1} ({name or 'no name'}): {exc}") from None
+    corners = np.concatenate(parts)
+    counts = np.array([len(c) // 3 for c in parts])
+    names = [name or f"solid_{k}" for k, (_, name) in enumerate(solids, start=1)]
+    return SurfaceFile(corners, np.arange(corners.shape[0], dtype=np.int64).reshape(-1, 3), *_named_groups(names, counts))
+
+
+_ASCII_LOWER = str.maketrans("ABCDEFGHIJKLMNOPQRSTUVWXYZ", "abcdefghijklmnopqrstuvwxyz")
+
+
+def _stl_solid_lines(text: str, lower: str) -> list[tuple[int, str]]:
+    """(where the solid's facets start, its name) of each ``solid`` line of an ASCII STL: the
+    word first on its line, the rest of the line the name.  lower: text with ASCII letters in
+    lower case (a regular expression over the text took 0.07 s of an 86 k-triangle file, these
+    searches a few ms)."""
+    opens = []
+    at = lower.find("solid")
+    while at >= 0:
+        line_end = lower.find("\n", at)
+        line_end = len(lower) if line_end < 0 else line_end
+        rest = text[at + 5:line_end]
+        if not lower[lower.rfind("\n", 0, at) + 1:at].strip() and (not rest or rest[0].isspace()):
+            opens.append((line_end, rest.strip()))
+        at = lower.find("solid", line_end)
+    return opens
+
+
+def _ascii_stl_corners(tokens: list) -> tuple[np.ndarray, np.ndarray]:
+    """The corners (3F, 3) and triangles (F, 3) of an ASCII STL's lower-case words."""
     fast = _ascii_stl_facets(tokens)
     if fast is not None:
         return fast
@@ -170,15 +236,51 @@ def _ascii_stl_facets(words: list) -> tuple[np.ndarray, np.ndarray] | None:
 
 # --- OBJ ---------------------------------------------------------------------------------
 
-def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+def _read_obj(data: bytes) -> SurfaceFile:
     """Wavefront OBJ: ``v x y z [w]`` vertices, ``f`` faces of 3 or more corners ``i``,
     ``i/t``, ``i/t/n`` or ``i//n`` (the vertex index i from 1, or negative: counted back
-    from the latest vertex); every other statement (normals, texture coordinates, groups,
-    materials, lines) ignored."""
-    lines = _text(data).splitlines()
+    from the latest vertex); the groups of ``g name`` statements (of ``o name`` in a file
+    with no ``g``; faces before the first are in ``default``), two or more named; every other
+    statement (normals, texture coordinates, materials, lines) ignored."""
+    text = _text(data)
+    lines = text.splitlines()
     fast = _obj_triangles(lines)
     if fast is not None:
-        return fast
+        vertices, faces = fast
+        triangles = None
+    else:
+        vertices, polygons = _obj_polygons(lines)
+        faces = _fans(polygons)
+        triangles = np.array([len(p) - 2 for p in polygons], dtype=np.int64)
+    if _OBJ_GROUP.search(text) is None:
+        return SurfaceFile(vertices, faces)
+    return SurfaceFile(vertices, faces, *_named_groups(_obj_face_groups(lines), triangles))
+
+
+_OBJ_GROUP = re.compile(r"^[ \t]*[go](?:[ \t]|$)", re.MULTILINE)
+
+
+def _obj_face_groups(lines: list) -> list:
+    """The group name of each ``f`` statement, in order: the latest ``g`` statement's names
+    (joined by spaces) if the file has any, else the latest ``o`` statement's; ``default``
+    before the first and for a statement with no name."""
+    by_g, by_o, g, o, has_g = [], [], "default", "default", False
+    for line in lines:
+        words = line.split("#", 1)[0].split()
+        if not words:
+            continue
+        if words[0] == "f":
+            by_g.append(g)
+            by_o.append(o)
+        elif words[0] == "g":
+            g, has_g = " ".join(words[1:]) or "default", True
+        elif words[0] == "o":
+            o = " ".join(words[1:]) or "default"
+    return by_g if has_g else by_o
+
+
+def _obj_polygons(lines: list) -> tuple[np.ndarray, list]:
+    """Vertices (V, 3) and faces (lists of vertex ids from 0) of an OBJ's lines, statement by statement."""
     coords, polygons = [], []
     for number, line in enumerate(lines, start=1):
         words = line.split("#", 1)[0].split()
@@ -201,8 +303,7 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             if 0 in ids:
                 raise _Malformed(f"line {number} reads {line.strip()!r}: vertex indices count from 1 (or back from -1)")
             polygons.append([i - 1 if i > 0 else seen + i for i in ids])
-    vertices = _numbers(coords, np.float64, "a vertex coordinate").reshape(-1, 3)
-    return vertices, _fans(polygons)
+    return _numbers(coords, np.float64, "a vertex coordinate").reshape(-1, 3), polygons
 
 
 def _obj_triangles(lines: list) -> tuple[np.ndarray, np.ndarray] | None:

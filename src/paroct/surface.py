@@ -34,7 +34,9 @@ class Surface:
     vertices: (V, 3) float64, model units.  faces: (F, 3) int32, counter-clockwise seen
     from outside.  volume, area: of the solid, model units.  genus: of the whole
     boundary (sum over components).  components: number of boundary shells.
-    bbox_min, bbox_max: (3,) float64 corners of the vertices' bounding box (derived).
+    face_groups: (F,) int32, the named group 0 .. G - 1 of each triangle (the solids of an
+    ASCII STL, the groups of an OBJ: readers.SurfaceFile), or None; group_names: the G
+    names.  bbox_min, bbox_max: (3,) float64 corners of the vertices' bounding box (derived).
     """
 
     vertices: np.ndarray
@@ -43,6 +45,8 @@ class Surface:
     area: float
     genus: int
     components: int
+    face_groups: np.ndarray | None = field(default=None, repr=False, compare=False)
+    group_names: tuple[str, ...] = field(default=(), compare=False)
     bbox_min: np.ndarray = field(init=False, repr=False, compare=False)
     bbox_max: np.ndarray = field(init=False, repr=False, compare=False)
     #: Set by load_surface on the surfaces it built; one made by hand is validated when meshed.
@@ -55,6 +59,9 @@ class Surface:
         for name, corner in (("bbox_min", lo), ("bbox_max", hi)):
             corner.setflags(write=False)
             object.__setattr__(self, name, corner)
+        groups, names = _checked_groups(self.face_groups, self.group_names, np.shape(self.faces)[0], "Surface")
+        object.__setattr__(self, "face_groups", groups)
+        object.__setattr__(self, "group_names", names)
 
     @property
     def diagonal(self) -> float:
@@ -63,6 +70,26 @@ class Surface:
     def to_manifold(self) -> manifold3d.Manifold:
         """The solid as a manifold3d.Manifold (built anew on each call)."""
         return _to_manifold(self.vertices, self.faces)
+
+
+def _checked_groups(face_groups, group_names, n_faces: int, label: str) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """face_groups as a read-only (F,) int32 array with every value naming one of group_names
+    (a tuple of str), or (None, ()); ParoctError, stating the numbers, otherwise."""
+    if face_groups is None:
+        if len(group_names):
+            raise ParoctError(f"{label}: {len(group_names)} group names but no face_groups")
+        return None, ()
+    names = tuple(group_names)
+    if not all(isinstance(name, str) for name in names):
+        raise ParoctError(f"{label}: group_names must be strings")
+    groups = np.asarray(face_groups)
+    if groups.shape != (n_faces,) or (groups.size and not np.issubdtype(groups.dtype, np.integer)):
+        raise ParoctError(f"{label}: face_groups.shape = {groups.shape}, dtype {groups.dtype}; expected ({n_faces},) integers")
+    if groups.size and (groups.min() < 0 or groups.max() >= len(names)):
+        raise ParoctError(f"{label}: face_groups span {groups.min()} .. {groups.max()}, but len(group_names) = {len(names)}")
+    groups = groups.astype(np.int32)
+    groups.setflags(write=False)
+    return groups, names
 
 
 def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -440,10 +467,11 @@ def _pair_and_split(vertices, faces):
     return new_vertices[:m], new_faces, True
 
 
-def _to_manifold(vertices: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
+def _to_manifold(vertices: np.ndarray, faces: np.ndarray, face_id: np.ndarray | None = None) -> manifold3d.Manifold:
     mesh = manifold3d.Mesh64(
         vert_properties=np.ascontiguousarray(vertices, dtype=np.float64),
         tri_verts=np.ascontiguousarray(faces, dtype=np.uint64),
+        face_id=None if face_id is None else np.ascontiguousarray(face_id, dtype=np.uint64),
     )
     return manifold3d.Manifold(mesh)
 
@@ -486,11 +514,14 @@ def _check_scale(vertices: np.ndarray, label: str) -> None:
 
 
 def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "surface", *,
-                        weld: bool = True) -> Surface:
+                        weld: bool = True, face_groups: np.ndarray | None = None,
+                        group_names: tuple[str, ...] = ()) -> Surface:
     """Validate a triangle surface and build its solid; see load_surface.  weld: merge exactly
     coincident vertices (a triangle soup, as files hold them); False keeps the vertices as
     numbered, dropping only those no face uses (a manifold3d mesh, whose sheets touching
-    along an edge or at a vertex have vertices of their own)."""
+    along an edge or at a vertex have vertices of their own).  face_groups (F,) and
+    group_names: named groups of the faces (see Surface), kept with the triangles through
+    welding and the union of overlapping shells."""
     try:
         vertices, faces = np.asarray(vertices), np.asarray(faces)
     except (ValueError, TypeError) as exc:  # ragged nested lists
@@ -514,6 +545,11 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
             f"{label}: face indices span {faces.min()}..{faces.max()} but len(vertices) = {vertices.shape[0]}"
         )
     faces = faces.astype(np.int64, copy=False)
+    groups, names = _checked_groups(face_groups, group_names, faces.shape[0], label)
+    if groups is not None:  # the faces welding keeps: no two corners at one position (or one vertex)
+        c = vertices[faces] if weld else faces
+        same = [(c[:, i] == c[:, (i + 1) % 3]).reshape(c.shape[0], -1).all(axis=1) for i in range(3)]
+        groups = groups[~(same[0] | same[1] | same[2])]
     vertices, faces, finite = _weld(vertices, faces) if weld else _used_only(vertices, faces)
     if not finite:
         raise ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
@@ -534,7 +570,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         volume, area = _volume_area(vertices, faces, math.ldexp(1.0, -math.frexp(float((hi - lo).max()))[1]))
         if not volume > 0:
             raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")
-        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1))
+        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1, groups, names))
 
     # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
     solids, cavities, lost, signed_sum, area_sum = [], [], [], 0.0, 0.0
@@ -545,7 +581,9 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         # shell O(V), 2 ms a shell for 3000 small spheres.
         used, shell_faces = np.unique(faces[by_shell[bounds[c]:bounds[c + 1]]], return_inverse=True)
         shell_vertices, shell_faces = vertices[used], shell_faces.reshape(-1, 3)
-        part = _to_manifold(shell_vertices, shell_faces)
+        # manifold3d carries each triangle's face id through the union: the group it came from.
+        face_id = None if groups is None else groups[by_shell[bounds[c]:bounds[c + 1]]]
+        part = _to_manifold(shell_vertices, shell_faces, face_id)
         status = part.status()
         if status.name != "NoError":
             raise _status_error(status.name, label)
@@ -555,7 +593,7 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         if vol > 0:
             solids.append(part)
         elif vol < 0:
-            cavities.append(_to_manifold(shell_vertices, shell_faces[:, ::-1]))
+            cavities.append(_to_manifold(shell_vertices, shell_faces[:, ::-1], face_id))
             lost.append((shell_faces.shape[0], (shell_vertices.min(axis=0) + shell_vertices.max(axis=0)) / 2, vol))
     if not solids:
         raise ParoctError(f"{label}: the surface encloses zero or negative volume (inside out?)")
@@ -579,13 +617,16 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         # at corners stay apart, as they do in the mesh.  manifold3d's union would join some of
         # them through zero-width necks (a 6 x 6 x 6 checkerboard of 108 cubes came back as 36
         # shells), a topology no mesh keeps.
-        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, n_shells), n_shells))
+        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, n_shells), n_shells,
+                                  groups, names))
     out = solid.to_mesh64()
     out_vertices = np.array(out.vert_properties, dtype=np.float64)[:, :3]
     out_faces = np.array(out.tri_verts, dtype=np.int32)
+    out_groups = None if groups is None else np.asarray(out.face_id, dtype=np.int64)
     *_, fans, shell = _shell_topology(out_faces, out_vertices.shape[0])
     n_shells = int(shell.max()) + 1
-    return _validated(Surface(out_vertices, out_faces, float(volume), float(area), _genus(fans, out_faces, n_shells), n_shells))
+    return _validated(Surface(out_vertices, out_faces, float(volume), float(area), _genus(fans, out_faces, n_shells), n_shells,
+                              out_groups, names))
 
 
 def _validated(surface: Surface) -> Surface:
@@ -681,6 +722,7 @@ def load_surface(source: SurfaceSource) -> Surface:
             raise ParoctError(f"expected a (vertices, faces) pair, got a tuple of {len(source)}")
         return surface_from_arrays(source[0], source[1])
     if isinstance(source, (str, os.PathLike)):
-        vertices, faces = read_surface_file(source)
-        return surface_from_arrays(vertices, faces, str(source))
+        read = read_surface_file(source)
+        return surface_from_arrays(read.vertices, read.faces, str(source), face_groups=read.face_groups,
+                                   group_names=read.group_names)
     raise ParoctError(f"cannot mesh a {type(source).__name__}: pass a file path, a manifold3d.Manifold or (vertices, faces)")

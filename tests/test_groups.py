@@ -1,0 +1,201 @@
+"""Named groups of the input's triangles (the solids of an ASCII STL, an OBJ's g groups): read,
+carried with the triangles through welding and the union of shells, and written as named
+boundary patches."""
+
+from __future__ import annotations
+
+import manifold3d
+import meshio
+import numpy as np
+import pytest
+
+import paroct
+from paroct import ParoctError, boundary_patches, load_surface
+from paroct.cli import main
+from paroct.io import _abaqus_names, write_mesh
+from paroct.readers import read_surface_file
+from paroct.surface import Surface, surface_from_arrays
+
+CUBE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+BOX = np.array([1.0, 2.0, 3.0])
+BOX_V = CUBE_V * BOX
+# Two triangles a side, outward: z = 0, z = 3, y = 0, x = 1, y = 2, x = 0.
+SIDE_FACES = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5],
+                       [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]]).reshape(6, 2, 3)
+SIDE_AXIS_HIGH = [(2, False), (2, True), (1, False), (0, True), (1, True), (0, False)]
+
+
+def _stl_solid(name: str, faces: np.ndarray, keyword: str = "solid") -> str:
+    facets = "".join("facet normal 0 0 0\n outer loop\n" + "".join(f"  vertex {x:g} {y:g} {z:g}\n" for x, y, z in BOX_V[f])
+                     + " endloop\nendfacet\n" for f in faces)
+    return f"{keyword} {name}\n{facets}end{keyword} {name}\n"
+
+
+def _side_of(centroids: np.ndarray, size: float) -> np.ndarray:
+    """Side 0 .. 5 (SIDE_FACES' order) of each boundary triangle's centroid more than two sizes
+    from every edge of the box; -1 near the edges, where stuffing cuts the corner."""
+    gap = np.minimum(centroids, BOX - centroids)
+    axis = np.argmin(gap, axis=1)
+    high = centroids[np.arange(len(centroids)), axis] > BOX[axis] / 2
+    side = np.array([SIDE_AXIS_HIGH.index((int(a), bool(h))) for a, h in zip(axis, high)])
+    return np.where(np.sort(gap, axis=1)[:, 1] > 2 * size, side, -1)
+
+
+NAMES = ["bottom", "top", "front face", "right", "back", "left"]
+
+
+@pytest.fixture(scope="module")
+def named_box(tmp_path_factory):
+    """An ASCII STL of the 1 x 2 x 3 box, one named solid a side, and its mesh at size 0.1."""
+    path = tmp_path_factory.mktemp("groups") / "box.stl"
+    path.write_text("".join(_stl_solid(name, faces) for name, faces in zip(NAMES, SIDE_FACES)))
+    return path, paroct.mesh(path, size=0.1)
+
+
+def test_ascii_stl_solids_are_groups(named_box):
+    path, _ = named_box
+    read = read_surface_file(path)
+    assert read.group_names == tuple(NAMES)
+    assert np.array_equal(read.face_groups, np.repeat(np.arange(6), 2))
+    surface = load_surface(path)  # welded: 8 vertices, the faces in file order
+    assert surface.group_names == tuple(NAMES) and np.array_equal(surface.face_groups, read.face_groups)
+    assert surface.volume == pytest.approx(6.0, rel=1e-12)
+
+
+def test_named_groups_are_the_boundary_patches(named_box):
+    """Every boundary triangle away from the box's edges is tagged with its side's group, by name;
+    asked for a feature angle, the patches are the sides again, numbered by first triangle."""
+    _, result = named_box
+    patches = result.boundary_patches()
+    assert patches.feature_angle is None and patches.names == tuple(NAMES) and patches.n_patches == 6
+    side = _side_of(result.mesh.points[patches.faces].mean(axis=1), result.report.size)
+    assert (side >= 0).sum() > len(side) / 2
+    assert np.array_equal(patches.patches[side >= 0], side[side >= 0] + 1)
+    by_angle = result.boundary_patches(40)
+    assert by_angle.feature_angle == 40 and by_angle.names == tuple(f"patch_{p}" for p in range(1, 7))
+    same = boundary_patches(result.mesh.points, result.mesh.tets, result.surface)
+    assert np.array_equal(same.patches, patches.patches) and same.names == patches.names
+
+
+def test_groups_need_not_follow_sharp_edges(tmp_path):
+    """An OBJ putting three sides in ``hot`` and three in ``cold`` (quads, so the line parser
+    reads it): two patches, each side's triangles in its group."""
+    hot = {0, 2, 5}
+    quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]  # SIDE_FACES' sides
+    text = "".join(f"v {x:g} {y:g} {z:g}\n" for x, y, z in BOX_V)
+    for s, quad in enumerate(quads):
+        text += f"g {'hot' if s in hot else 'cold'}\nf " + " ".join(str(i + 1) for i in quad) + "\n"
+    path = tmp_path / "box.obj"
+    path.write_text(text)
+    read = read_surface_file(path)
+    assert read.group_names == ("hot", "cold") and read.faces.shape == (12, 3)
+    assert np.array_equal(read.face_groups, np.repeat([0 if s in hot else 1 for s in range(6)], 2))
+    result = paroct.mesh(path, size=0.1)
+    patches = result.boundary_patches()
+    side = _side_of(result.mesh.points[patches.faces].mean(axis=1), result.report.size)
+    want = np.where(np.isin(side, list(hot)), 1, 2)
+    assert patches.n_patches == 2 and np.array_equal(patches.patches[side >= 0], want[side >= 0])
+
+
+@pytest.mark.parametrize("text, names, groups", [
+    # the fast path (triangles, plain indices): faces before the first g are in "default"
+    ("f 1 3 2\ng wall one\nf 1 4 3\ng b\nf 5 6 7\ng wall one\nf 5 7 8\n", ("default", "wall one", "b"), [0, 1, 2, 1]),
+    # o only: objects are the groups; a nameless statement is "default"
+    ("o a\nf 1 3 2\nf 1 4 3\no\nf 5 6 7\nf 5 7 8\n", ("a", "default"), [0, 0, 1, 1]),
+    # g wins over o; a quad (slow path) gives two triangles of its group
+    ("o x\ng a\nf 1 4 3 2\no y\ng b\nf 5 6 7 8\n", ("a", "b"), [0, 0, 1, 1]),
+    # one group, or none: no groups
+    ("g a\nf 1 3 2\nf 1 4 3\n", (), None),
+    ("f 1 3 2\nf 1 4 3\n", (), None),
+])
+def test_obj_groups(tmp_path, text, names, groups):
+    path = tmp_path / "part.obj"
+    path.write_text("".join(f"v {x:g} {y:g} {z:g}\n" for x, y, z in BOX_V) + text)
+    read = read_surface_file(path)
+    assert read.group_names == names
+    assert (read.face_groups is None) if groups is None else np.array_equal(read.face_groups, groups)
+
+
+def test_stl_solid_names_as_found(tmp_path):
+    """Upper-case keywords, CRLF line ends, a solid with no name (solid_<k>), a name used twice
+    (one group); one solid alone is no group."""
+    text = (_stl_solid("", SIDE_FACES[0], "SOLID") + _stl_solid("Side A", SIDE_FACES[1]) + _stl_solid("Side A", SIDE_FACES[2])
+            + "".join(_stl_solid(f"s{k}", SIDE_FACES[k]) for k in range(3, 6)))
+    path = tmp_path / "box.stl"
+    path.write_bytes(text.replace("\n", "\r\n").encode())
+    read = read_surface_file(path)
+    assert read.group_names == ("solid_1", "Side A", "s3", "s4", "s5")
+    assert np.array_equal(read.face_groups, [0, 0, 1, 1, 1, 1, 2, 2, 3, 3, 4, 4])
+    one = tmp_path / "one.stl"
+    one.write_text(_stl_solid("box", SIDE_FACES.reshape(-1, 3)))
+    assert read_surface_file(one).face_groups is None and load_surface(one).face_groups is None
+
+
+def test_groups_follow_the_triangles_through_welding_and_union():
+    """Degenerate triangles dropped by the weld take their group with them; two overlapping
+    cubes, each a group, are united by manifold3d, and each group's area is what is left of
+    its cube's surface."""
+    cube = manifold3d.Manifold.cube([1, 1, 1]).to_mesh64()
+    v = np.asarray(cube.vert_properties)[:, :3]
+    f = np.asarray(cube.tri_verts).astype(np.int64)
+    vertices = np.vstack([v, v + 0.5, [[5.0, 5.0, 5.0]]])
+    flat = np.array([[0, 0, 3], [16, 16, 16]])  # repeated vertices: dropped
+    faces = np.vstack([flat[:1], f, flat[1:], f + len(v)])
+    groups = np.concatenate([[2], np.zeros(len(f), int), [2], np.ones(len(f), int)])
+    surface = surface_from_arrays(vertices, faces, face_groups=groups, group_names=("a", "b", "flat"))
+    assert surface.components == 1 and surface.volume == pytest.approx(2 - 0.125, rel=1e-12)
+    corners = surface.vertices[surface.faces]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    assert np.bincount(surface.face_groups, weights=area, minlength=3) == pytest.approx([5.25, 5.25, 0.0], rel=1e-12)
+    apart = surface_from_arrays(np.vstack([v, v + 2.0]), np.vstack([f, f + len(v)]),
+                                face_groups=np.repeat([1, 0], len(f)), group_names=("a", "b"))
+    assert apart.components == 2 and np.array_equal(apart.face_groups, np.repeat([1, 0], len(f)))
+
+
+@pytest.mark.parametrize("groups, names, match", [
+    (np.zeros(5, int), ("a",), r"face_groups.shape = \(5,\)"),
+    (np.full(12, 1), ("a",), r"face_groups span 1 .. 1, but len\(group_names\) = 1"),
+    (np.zeros(12), ("a",), "expected \\(12,\\) integers"),
+    (None, ("a",), "1 group names but no face_groups"),
+    (np.zeros(12, int), (1,), "group_names must be strings"),
+])
+def test_bad_groups_are_refused_saying_why(groups, names, match):
+    faces = SIDE_FACES.reshape(-1, 3)
+    with pytest.raises(ParoctError, match=match):
+        surface_from_arrays(BOX_V, faces, face_groups=groups, group_names=names)
+    with pytest.raises(ParoctError, match=match):
+        Surface(BOX_V, faces, 6.0, 22.0, 0, 1, groups, names)
+
+
+def test_gmsh_and_abaqus_files_name_the_groups(tmp_path, named_box):
+    _, result = named_box
+    patches = result.boundary_patches()
+    msh = tmp_path / "box.msh"
+    write_mesh(msh, result.mesh.points, result.mesh.tets, boundary=patches)
+    back = meshio.read(msh)
+    assert {name: tuple(v) for name, v in back.field_data.items()} == {
+        "solid": (1, 3), **{name: (p, 2) for p, name in enumerate(NAMES, start=1)}}
+    inp = tmp_path / "box.inp"
+    write_mesh(inp, result.mesh.points, result.mesh.tets, boundary=patches)
+    back = meshio.read(inp)
+    for p, name in enumerate(_abaqus_names(patches.names), start=1):
+        assert np.array_equal(np.sort(back.point_sets[name]), np.unique(patches.faces[patches.patches == p]))
+    assert "*SURFACE, NAME=FRONT_FACE, TYPE=ELEMENT" in inp.read_text()
+
+
+def test_abaqus_names_are_valid_and_distinct():
+    names = _abaqus_names(("inlet wall", "Inlet_Wall", "3d", "a" * 100, "a" * 100, "x\"y", "INLET_WALL_2", "inlet wall"))
+    assert names[:3] == ["INLET_WALL", "INLET_WALL_2", "P_3D"] and names[5] == "X_Y"
+    assert len(set(names)) == len(names)
+    assert all(len(n) <= 77 and n[0].isalpha() and n.replace("_", "").isalnum() for n in names)
+
+
+def test_cli_lists_the_named_patches(tmp_path, named_box, capsys):
+    path, _ = named_box
+    out = tmp_path / "box.msh"
+    assert main(["mesh", str(path), "-o", str(out), "--size", "0.2", "--patches"]) == 0
+    summary = capsys.readouterr().out
+    assert "in 6 patches (the input's named groups)" in summary and "patch 3 'front face':" in summary
+    assert main(["mesh", str(path), "-o", str(out), "--size", "0.2", "--patches", "40"]) == 0
+    assert "in 6 patches (feature angle 40 deg)" in capsys.readouterr().out
+    assert set(meshio.read(out).field_data) == {"solid", *(f"patch_{p}" for p in range(1, 7))}
