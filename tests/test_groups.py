@@ -199,3 +199,17 @@ def test_cli_lists_the_named_patches(tmp_path, named_box, capsys):
     assert main(["mesh", str(path), "-o", str(out), "--size", "0.2", "--patches", "40"]) == 0
     assert "in 6 patches (feature angle 40 deg)" in capsys.readouterr().out
     assert set(meshio.read(out).field_data) == {"solid", *(f"patch_{p}" for p in range(1, 7))}
+
+
+def test_groups_given_with_arrays_or_a_hand_made_surface_reach_the_patches():
+    """A CAD kernel's face labels: surface_from_arrays takes them, and a hand-made Surface keeps
+    them when mesh() validates it."""
+    faces = SIDE_FACES.reshape(-1, 3)
+    groups = np.repeat([0, 0, 1, 1, 1, 0], 2)
+    built = paroct.surface_from_arrays(BOX_V, faces, face_groups=groups, group_names=("ends", "sides"))
+    by_hand = Surface(BOX_V, faces, 6.0, 22.0, 0, 1, groups, ("ends", "sides"))
+    for surface in (built, by_hand):
+        result = paroct.mesh(surface, size=0.2)
+        patches = result.boundary_patches()
+        assert patches.names == ("ends", "sides") and set(patches.patches.tolist()) == {1, 2}
+        assert np.array_equal(result.surface.face_groups, groups)

@@ -716,7 +716,8 @@ def load_surface(source: SurfaceSource) -> Surface:
             # A touching edge no pairing undoes (flat faces around it): the manifold's own vertices.
             return surface_from_arrays(positions, faces, "manifold", weld=False)
     if isinstance(source, Surface):  # one of ours as it is; one made by hand checked like arrays
-        return source if source.validated else surface_from_arrays(source.vertices, source.faces)
+        return source if source.validated else surface_from_arrays(
+            source.vertices, source.faces, face_groups=source.face_groups, group_names=source.group_names)
     if isinstance(source, tuple):
         if len(source) != 2:
             raise ParoctError(f"expected a (vertices, faces) pair, got a tuple of {len(source)}")
