@@ -147,6 +147,14 @@ def test_groups_follow_the_triangles_through_welding_and_union():
     corners = surface.vertices[surface.faces]
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     assert np.bincount(surface.face_groups, weights=area, minlength=3) == pytest.approx([5.25, 5.25, 0.0], rel=1e-12)
+    # Overlapping solids around a cavity (subtracted): the cavity's triangles keep their group.
+    hollow = surface_from_arrays(np.vstack([4 * v, 4 * v + [2, 0, 0], v + 1.5]), np.vstack([f, f + 8, (f + 16)[:, ::-1]]),
+                                 face_groups=np.repeat([0, 1, 2], len(f)), group_names=("a", "b", "cavity"))
+    corners = hollow.vertices[hollow.faces]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    assert hollow.volume == pytest.approx(95.0, rel=1e-12)
+    groups_area = np.bincount(hollow.face_groups, weights=area, minlength=3)
+    assert groups_area[2] == pytest.approx(6.0, rel=1e-12) and groups_area[:2].sum() == pytest.approx(128.0, rel=1e-12)
     apart = surface_from_arrays(np.vstack([v, v + 2.0]), np.vstack([f, f + len(v)]),
                                 face_groups=np.repeat([1, 0], len(f)), group_names=("a", "b"))
     assert apart.components == 2 and np.array_equal(apart.face_groups, np.repeat([1, 0], len(f)))
