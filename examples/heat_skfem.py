@@ -1,10 +1,10 @@
 """Steady heat conduction through a meshed part with scikit-fem, boundary conditions on patches.
 
     pip install -e ".[examples]"
-    python examples/heat_skfem.py [PART.stl] [--divisions 40] [--cold P] [--hot Q]
+    python examples/heat_skfem.py [PART.stl] [--divisions 40] [--cold P] [--hot Q]   (P, Q: patch numbers or names)
 
-paroct meshes the part and tags its boundary triangles by surface patch (the surface split
-at edges sharper than 40 degrees); scikit-fem solves -div(k grad T) = 0 with linear tets,
+paroct meshes the part and tags its boundary triangles by surface patch (the input's named
+groups, else the surface split at edges sharper than 40 degrees); scikit-fem solves -div(k grad T) = 0 with linear tets,
 T = 0 on the cold patch, T = 1 on the hot one, no flux through the rest.  By default the
 cold and hot patches are the two whose triangles lie lowest and highest in z.  Prints the
 patches, the heat flowing in and out (equal, up to the solver's tolerance) and the
@@ -60,8 +60,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("surface", nargs="?", default=str(ROOT / "data" / "angle_block.stl"))
     ap.add_argument("--divisions", type=float, default=40)
-    ap.add_argument("--cold", type=int, help="patch held at T = 0 (default: the lowest in z)")
-    ap.add_argument("--hot", type=int, help="patch held at T = 1 (default: the highest in z)")
+    ap.add_argument("--cold", help="patch held at T = 0, by number or name (default: the lowest in z)")
+    ap.add_argument("--hot", help="patch held at T = 1, by number or name (default: the highest in z)")
     args = ap.parse_args(argv)
     try:
         result = paroct.mesh(args.surface, divisions=args.divisions)
@@ -73,11 +73,19 @@ def main(argv=None) -> int:
     centroids = points[patches.faces].mean(axis=1)
     present = np.unique(patches.patches)
     height = {int(p): float(centroids[patches.patches == p, 2].mean()) for p in present}
-    cold = args.cold if args.cold is not None else min(height, key=height.get)
-    hot = args.hot if args.hot is not None else max(height, key=height.get)
-    for p in (cold, hot):
-        if p not in height:
-            print(f"heat_skfem: patch {p} has no boundary triangle; patches: {', '.join(map(str, height))}", file=sys.stderr)
+
+    def patch(given: str | None, default: int) -> int | None:  # by number or by name; None if no such patch meshed
+        if given is None:
+            return default
+        p = int(given) if given.isdigit() else patches.names.index(given) + 1 if given in patches.names else None
+        return p if p in height else None
+
+    cold = patch(args.cold, min(height, key=height.get))
+    hot = patch(args.hot, max(height, key=height.get))
+    for p, given in ((cold, args.cold), (hot, args.hot)):
+        if p is None:
+            listed = ", ".join(f"{q} {patches.names[q - 1]!r}" for q in height)
+            print(f"heat_skfem: no patch {given!r} with boundary triangles; patches: {listed}", file=sys.stderr)
             return 2
     print(f"{len(result.mesh.tets)} tets, {len(patches.faces)} boundary triangles in {patches.n_patches} patches")
     cold_name, hot_name = patches.names[cold - 1], patches.names[hot - 1]

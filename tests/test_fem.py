@@ -64,3 +64,27 @@ def test_the_example_runs_on_the_bundled_part(capsys):
     out = capsys.readouterr().out
     flows = [float(line.split(": ")[1].split(",")[0]) for line in out.splitlines() if line.startswith("heat in")]
     assert len(flows) == 1 and flows[0] > 0
+
+
+def test_the_example_holds_named_patches(tmp_path, capsys):
+    """The 1 x 1 x 2 bar as an ASCII STL with one named solid an end and one for the sides: the
+    example takes the ends by name, and the flow is k A / L = 0.5 as above."""
+    bar = manifold3d.Manifold.cube([1, 1, 2]).to_mesh64()
+    vertices, faces = np.asarray(bar.vert_properties)[:, :3], np.asarray(bar.tri_verts)
+    normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    name = np.where(normals[:, 2] < -0.5, "base", np.where(normals[:, 2] > 0.5, "lid", "wall"))
+    text = ""
+    for solid in ("base", "lid", "wall"):
+        text += f"solid {solid}\n" + "".join(
+            "facet normal 0 0 0\nouter loop\n" + "".join("vertex %.17g %.17g %.17g\n" % tuple(vertices[v]) for v in f)
+            + "endloop\nendfacet\n" for f in faces[name == solid]) + f"endsolid {solid}\n"
+    path = tmp_path / "bar.stl"
+    path.write_text(text)
+    example = _example()
+    assert example.main([str(path), "--divisions", "20", "--cold", "lid", "--hot", "base"]) == 0
+    out = capsys.readouterr().out
+    assert "T = 0 on patch 2 'lid'" in out and "T = 1 on patch 1 'base'" in out
+    flow = float(next(line for line in out.splitlines() if line.startswith("heat in")).split(": ")[1].split(",")[0])
+    assert abs(flow - 0.5) < 0.01
+    assert example.main([str(path), "--divisions", "20", "--cold", "side"]) == 2
+    assert "no patch 'side' with boundary triangles; patches: 1 'base', 2 'lid', 3 'wall'" in capsys.readouterr().err
