@@ -603,3 +603,35 @@ def triangles_cross(a: np.ndarray, b: np.ndarray) -> bool:
         return len(signs) == 1 and 0 not in signs
 
     return any(edge_through(x[i], x[(i + 1) % 3], y) for x, y in ((a, b), (b, a)) for i in range(3))
+
+
+def nearest_on_segments(point: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, float]:
+    """The nearest point of any segment (starts[i], ends[i]) to point, and its distance:
+    each segment sampled finely enough, then the best refined by the exact projection."""
+    best, best_d = None, math.inf
+    for a, b in zip(starts, ends):
+        d = b - a
+        dd = float(d @ d)
+        t = 0.0 if dd == 0 else min(1.0, max(0.0, float((point - a) @ d) / dd))
+        for s in (0.0, 1.0, t):
+            q = a + s * d
+            dist = float(np.linalg.norm(point - q))
+            if dist < best_d:
+                best, best_d = q, dist
+    return best, best_d
+
+
+def feature_curves(faces: np.ndarray, labels: np.ndarray) -> tuple[set, set]:
+    """({(sorted edge, sorted label pair)} of the edges between two labels, {vertices with
+    three or more labels}), by dictionaries of edges and vertices."""
+    edge_faces: dict = {}
+    for f, tri in enumerate(faces.tolist()):
+        for j in range(3):
+            edge_faces.setdefault(tuple(sorted((tri[j], tri[(j + 1) % 3]))), []).append(f)
+    curves = {(e, tuple(sorted((int(labels[f]), int(labels[g]))))) for e, (f, g) in edge_faces.items()
+              if labels[f] != labels[g]}
+    around: dict = {}
+    for f, tri in enumerate(faces.tolist()):
+        for v in tri:
+            around.setdefault(v, set()).add(int(labels[f]))
+    return curves, {v for v, s in around.items() if len(s) >= 3}

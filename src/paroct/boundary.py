@@ -156,13 +156,19 @@ def boundary_patches(points: np.ndarray, tets: np.ndarray, surface: Surface | Su
     return _tagged_boundary(points, tets, load_surface(surface), feature_angle)
 
 
+def surface_labels(surface: Surface, feature_angle: float | None) -> tuple[np.ndarray, tuple[str, ...], float | None]:
+    """(patch of each surface triangle (F,) int32 from 1, the patches' names or (), the feature
+    angle used or None): the named groups when the surface has them and feature_angle is None,
+    else surface_patches at feature_angle (default DEFAULT_FEATURE_ANGLE)."""
+    if feature_angle is None and surface.face_groups is not None:
+        return surface.face_groups + 1, surface.group_names, None
+    feature_angle = DEFAULT_FEATURE_ANGLE if feature_angle is None else feature_angle
+    return surface_patches(surface, feature_angle), (), feature_angle
+
+
 def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, feature_angle: float | None) -> BoundaryPatches:
     """boundary_patches over arrays known good (a mesh paroct made: points float64, tets int)."""
-    if feature_angle is None and surface.face_groups is not None:
-        labels, names = surface.face_groups + 1, surface.group_names
-    else:
-        feature_angle = DEFAULT_FEATURE_ANGLE if feature_angle is None else feature_angle
-        labels, names = surface_patches(surface, feature_angle), ()
+    labels, names, feature_angle = surface_labels(surface, feature_angle)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     neighbour = match_faces(tets)[0]
     owner, face = np.nonzero(neighbour < 0)

@@ -96,6 +96,11 @@ def build_parser() -> argparse.ArgumentParser:
                         f"sharper than {DEFAULT_FEATURE_ANGLE:g} degrees; with ANGLE, split at ANGLE degrees whatever "
                         "the groups.  Gmsh physical groups in .msh, surfaces and node sets in .inp, references in "
                         ".mesh, cell data boundary_patch elsewhere")
+    m.add_argument("--sharp-edges", type=float, nargs="?", const=_INPUT_GROUPS, metavar="ANGLE",
+                   help="move the boundary vertices beside sharp edges and corners onto them, as far as the tets "
+                        "around each keep dihedral angles in [15, 150] degrees: the borders of the patches --patches "
+                        "names (the input's named groups, else edges sharper than ANGLE degrees, default "
+                        f"{DEFAULT_FEATURE_ANGLE:g})")
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
     talk = m.add_mutually_exclusive_group()
@@ -174,6 +179,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
     result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
                   thin_features=not args.keep_size, min_size=args.min_size,
                   max_memory=max_memory, progress=progress if args.verbose else None)
+    if args.sharp_edges is not None:
+        result = result.with_sharp_edges(None if args.sharp_edges is _INPUT_GROUPS else args.sharp_edges)
     boundary = None if args.patches is None else result.boundary_patches(
         None if args.patches is _INPUT_GROUPS else args.patches)
     t1 = time.perf_counter()

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from . import rays
-from .boundary import BoundaryPatches, _tagged_boundary
+from .boundary import BoundaryPatches, _tagged_boundary, surface_labels
 from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
@@ -30,6 +30,7 @@ from .octree import (FaceBuckets, balance, face_buckets, faces_meeting_cells, oc
                      unique_level_keys)
 from .quality import OUTSIDE, outlier_flags, summarize
 from .repair import remove_pinches
+from .sharp import snap_to_features
 from .sizing import Region, SizeField, SizeFunction, positive_number, size_field, size_seeds
 from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
                        stuff, warp_targets)
@@ -125,6 +126,28 @@ class MeshResult:
             raise ParoctError("this result has no surface to take the patches from; call "
                               "paroct.boundary_patches(points, tets, surface) instead")
         return _tagged_boundary(self.mesh.points, self.mesh.tets, self.surface, feature_angle)
+
+    def with_sharp_edges(self, feature_angle: float | None = None) -> MeshResult:
+        """A new result whose boundary vertices beside the surface's sharp edges and corners
+        are moved onto them, each only as far as the tets around it keep their quality
+        (sharp.snap_to_features; reach: one size).  The edges are the borders of the patches
+        boundary_patches(feature_angle) tags: the input's named groups, or the surface split
+        at feature_angle degrees (default 40).  The report's angles, 3r/R and volume are
+        measured again, and a note says how many vertices moved."""
+        patches = self.boundary_patches(feature_angle)
+        labels, _, _ = surface_labels(self.surface, feature_angle)
+        snapped = snap_to_features(self.mesh.points, self.mesh.tets, patches, self.surface, labels, self.report.size)
+        report = dataclasses.replace(self.report, warnings=list(self.report.warnings), notes=list(self.report.notes),
+                                     stage_seconds=dict(self.report.stage_seconds))
+        if self.mesh.tets.shape[0]:
+            summary = summarize(snapped.points, self.mesh.tets, np.zeros(snapped.points.shape[0], dtype=np.bool_),
+                                FAT_RADIUS_RATIO)
+            report.min_dihedral, report.max_dihedral = summary.min_dihedral, summary.max_dihedral
+            report.min_radius_ratio, report.mesh_volume = summary.min_radius_ratio, summary.volume
+            report.fat_fraction = summary.n_fat / self.mesh.tets.shape[0]
+        report.notes.append(f"sharp edges: {snapped.moved.size} of {snapped.tried} boundary vertices within one size of "
+                            "an edge or corner between patches moved onto it (or part of the way)")
+        return MeshResult(TetMesh(snapped.points, self.mesh.tets), report, self.surface)
 
 
 def estimate_tets(surface: Surface, field: SizeField) -> int:
