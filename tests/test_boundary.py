@@ -270,3 +270,24 @@ def test_boundary_patches_takes_any_surface_source_and_refuses_bad_arrays(box_me
                                 (result.mesh.points, result.mesh.tets + 0.5, "tets.dtype = float64")):
         with pytest.raises(ParoctError, match=match):
             boundary_patches(points, tets, result.surface)
+
+
+@pytest.mark.parametrize("source, divisions", [
+    (DATA / "angle_block.stl", 35),  # the pinch repair removes tets: its boundary updated around them
+    (DATA / "bunny.stl", 20),
+    (manifold3d.Manifold.cube([1, 1, 0.04]), 25),  # a thin plate: the band refined near its walls
+])
+def test_patches_from_the_kept_boundary_faces_equal_those_from_matching(source, divisions):
+    """MeshResult keeps the boundary the pinch repair found; tagging from it (their tets found
+    in the vertices' stars) gives exactly what matching every face of the tets gives."""
+    from paroct.boundary import _tagged_boundary
+
+    result = paroct.mesh(source, divisions=divisions)
+    assert result.boundary_faces is not None
+    kept = result.boundary_patches()
+    matched = _tagged_boundary(result.mesh.points, result.mesh.tets, result.surface, None)
+    for name in ("faces", "tets", "tet_faces", "patches"):
+        assert np.array_equal(getattr(kept, name), getattr(matched, name)), name
+    bogus = result.boundary_faces[:, [0, 0, 0]]  # one vertex three times: no tet's face
+    with pytest.raises(ParoctError, match="no tet's faces"):
+        _tagged_boundary(result.mesh.points, result.mesh.tets, result.surface, None, bogus)

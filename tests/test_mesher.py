@@ -687,7 +687,8 @@ def test_compact_keeps_the_used_points_in_order(n_points, n_tets):
     want[used] = np.arange(used.size)
     np.testing.assert_array_equal(_used_ids(tets, n_points), want)
     want_tets = np.searchsorted(used, tets)
-    got_points, got_tets = _compact(points, tets)
+    got_points, got_tets, new_id = _compact(points, tets)
+    np.testing.assert_array_equal(new_id, want)
     np.testing.assert_array_equal(got_points, points[used])
     np.testing.assert_array_equal(got_tets, want_tets)
     assert got_tets is tets  # renumbered in place

@@ -25,7 +25,7 @@ from .check import nearest_triangles, validated_mesh
 from .errors import ParoctError
 from .features import face_normals
 from .surface import Surface, SurfaceSource, load_surface
-from .topology import TET_FACES, edge_bucket_starts, match_faces, union
+from .topology import TET_FACES, edge_bucket_starts, face_owners, match_faces, union, vertex_stars
 
 #: Default feature angle, degrees: edges where the surface turns by more bound patches.
 DEFAULT_FEATURE_ANGLE = 40.0
@@ -166,12 +166,23 @@ def surface_labels(surface: Surface, feature_angle: float | None) -> tuple[np.nd
     return surface_patches(surface, feature_angle), (), feature_angle
 
 
-def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, feature_angle: float | None) -> BoundaryPatches:
-    """boundary_patches over arrays known good (a mesh paroct made: points float64, tets int)."""
+def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, feature_angle: float | None,
+                     known: np.ndarray | None = None) -> BoundaryPatches:
+    """boundary_patches over arrays known good (a mesh paroct made: points float64, tets int).
+    known: the boundary triangles (B, 3) if known (MeshResult.boundary_faces): their tets are
+    then found in the stars of their vertices, one pass over the tets instead of matching
+    every face (fea_part at diag/40: 141 ms)."""
     labels, names, feature_angle = surface_labels(surface, feature_angle)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
-    neighbour = match_faces(tets)[0]
-    owner, face = np.nonzero(neighbour < 0)
+    if known is None:
+        owner, face = np.nonzero(match_faces(tets)[0] < 0)
+    else:
+        known = np.ascontiguousarray(known, dtype=np.int64)
+        owner, face = face_owners(tets, known, *vertex_stars(tets, np.unique(known[:, 0]), points.shape[0]))
+        if known.shape[0] and owner.min() < 0:
+            raise ParoctError("boundary faces given that are no tet's faces")
+        order = np.lexsort((face, owner))  # as matching lists them: by tet, then face
+        owner, face = owner[order], face[order].astype(np.int64)
     faces = tets[owner[:, None], TET_FACES[face]]
     if faces.shape[0]:
         centroids = (points[faces[:, 0]] + points[faces[:, 1]] + points[faces[:, 2]]) / 3

@@ -116,6 +116,9 @@ class MeshResult:
     mesh: TetMesh
     report: MeshReport
     surface: Surface | None = field(default=None, repr=False, compare=False)
+    #: The mesh's boundary triangles (B, 3) int32, outward, as the pinch repair found them, or
+    #: None (a result built by hand): boundary_patches starts from them.
+    boundary_faces: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def boundary_patches(self, feature_angle: float | None = None) -> BoundaryPatches:
         """The mesh's boundary triangles, each tagged with the patch of the surface it lies
@@ -125,7 +128,7 @@ class MeshResult:
         if self.surface is None:
             raise ParoctError("this result has no surface to take the patches from; call "
                               "paroct.boundary_patches(points, tets, surface) instead")
-        return _tagged_boundary(self.mesh.points, self.mesh.tets, self.surface, feature_angle)
+        return _tagged_boundary(self.mesh.points, self.mesh.tets, self.surface, feature_angle, self.boundary_faces)
 
     def with_sharp_edges(self, feature_angle: float | None = None) -> MeshResult:
         """A new result whose boundary vertices beside the surface's sharp edges and corners
@@ -147,7 +150,7 @@ class MeshResult:
             report.fat_fraction = summary.n_fat / self.mesh.tets.shape[0]
         report.notes.append(f"sharp edges: {snapped.moved.size} of {snapped.tried} boundary vertices within one size of "
                             "an edge or corner between patches moved onto it (or part of the way)")
-        return MeshResult(TetMesh(snapped.points, self.mesh.tets), report, self.surface)
+        return MeshResult(TetMesh(snapped.points, self.mesh.tets), report, self.surface, self.boundary_faces)
 
 
 def estimate_tets(surface: Surface, field: SizeField) -> int:
@@ -727,7 +730,9 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
 
     _measure(points, out_tets, core, boundary, report)
     _measure_misses(surface, points, faces_out, size, report)
-    mesh = TetMesh(*_compact(points, out_tets))
+    points, out_tets, new_id = _compact(points, out_tets)
+    mesh = TetMesh(points, out_tets)
+    faces_out = np.take(new_id, faces_out)  # every boundary vertex is a tet's: none is -1
     report.n_vertices = int(mesh.points.shape[0])
     stages.done("quality")
     if report.unresolved_cuts:
@@ -735,7 +740,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
             f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
-    return MeshResult(mesh, report, surface)
+    return MeshResult(mesh, report, surface, faces_out)
 
 
 #: A surface vertex with no mesh boundary vertex within this many times the band's longest
@@ -1282,10 +1287,10 @@ def _cut_points(coords, starts, ends, fracs, origin, h, matrix):
 def _compact(points, tets):
     """Drop unreferenced points (unused cut points, vertices of dropped tets); keep the order.
     tets (M, 4) int32 are renumbered in place (a new (M, 4) array cost a fresh page every
-    256 tets) and returned."""
+    256 tets) and returned, with the new id of each old point (-1: dropped)."""
     new_id = _used_ids(tets, points.shape[0])
     _renumber(tets, new_id)
-    return np.compress(new_id >= 0, points, axis=0), tets  # compress: 3x a boolean index
+    return np.compress(new_id >= 0, points, axis=0), tets, new_id  # compress: 3x a boolean index
 
 
 @nb.njit(cache=True)

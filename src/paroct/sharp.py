@@ -32,6 +32,7 @@ import numpy as np
 from .boundary import BoundaryPatches
 from .quality import _tet_measures
 from .surface import Surface
+from .topology import vertex_stars
 
 #: The guard on the tets around a moved vertex (degrees, and 3r/R): stuffing's own bound is
 #: [10.7, 164.8]; stars already beyond keep their worst.
@@ -134,7 +135,7 @@ def snap_to_features(points: np.ndarray, tets: np.ndarray, boundary: BoundaryPat
     goals = np.concatenate([corner_targets, seam_targets]).reshape(-1, 3)
     if not candidates.size:
         return SnappedVertices(points, np.zeros(0, dtype=np.int64), 0)
-    star_start, star_tets, local = _stars(tets, candidates, points.shape[0])
+    star_start, star_tets, local = vertex_stars(tets, candidates, points.shape[0])
     moved = _move_guarded(points, tets, star_start, star_tets, candidates, local, goals,
                           np.array(SNAP_FRACTIONS), math.cos(math.radians(SNAP_MIN_ANGLE)),
                           math.cos(math.radians(SNAP_MAX_ANGLE)), SNAP_MIN_RATIO, SNAP_SWEEPS)
@@ -182,33 +183,6 @@ def _curve_targets(vertices, segments, keys, queries, query_keys):
                 distance[k] = d
                 targets[k, 0], targets[k, 1], targets[k, 2] = cx, cy, cz
     return targets, distance
-
-
-@nb.njit(cache=True)
-def _stars(tets, vertices, n_points):
-    """The tets around each of the given vertices (K,), by a counting sort over one pass of
-    the tets: star_tets[star_start[i]:star_start[i + 1]] around vertices[i]; local (N,) maps
-    a point to its i (-1 for the others)."""
-    local = np.full(n_points, -1, dtype=np.int64)
-    for i in range(vertices.shape[0]):
-        local[vertices[i]] = i
-    star_start = np.zeros(vertices.shape[0] + 1, dtype=np.int64)
-    for t in range(tets.shape[0]):
-        for j in range(4):
-            i = local[tets[t, j]]
-            if i >= 0:
-                star_start[i + 1] += 1
-    for i in range(vertices.shape[0]):
-        star_start[i + 1] += star_start[i]
-    fill = star_start[:-1].copy()
-    star_tets = np.empty(star_start[-1], dtype=np.int64)
-    for t in range(tets.shape[0]):
-        for j in range(4):
-            i = local[tets[t, j]]
-            if i >= 0:
-                star_tets[fill[i]] = t
-                fill[i] += 1
-    return star_start, star_tets, local
 
 
 @nb.njit(cache=True)

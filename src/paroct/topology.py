@@ -110,6 +110,59 @@ def touching(tets, marked):
     return out
 
 
+@nb.njit(cache=True)
+def vertex_stars(tets, vertices, n_points):
+    """The tets around each of the given vertices (K,), by a counting sort over one pass of
+    the tets: star_tets[star_start[i]:star_start[i + 1]] around vertices[i], in tet order;
+    local (n_points,) maps a point to its i (-1 for the others)."""
+    local = np.full(n_points, -1, dtype=np.int64)
+    for i in range(vertices.shape[0]):
+        local[vertices[i]] = i
+    star_start = np.zeros(vertices.shape[0] + 1, dtype=np.int64)
+    for t in range(tets.shape[0]):
+        for j in range(4):
+            i = local[tets[t, j]]
+            if i >= 0:
+                star_start[i + 1] += 1
+    for i in range(vertices.shape[0]):
+        star_start[i + 1] += star_start[i]
+    fill = star_start[:-1].copy()
+    star_tets = np.empty(star_start[-1], dtype=np.int64)
+    for t in range(tets.shape[0]):
+        for j in range(4):
+            i = local[tets[t, j]]
+            if i >= 0:
+                star_tets[fill[i]] = t
+                fill[i] += 1
+    return star_start, star_tets, local
+
+
+@nb.njit(cache=True)
+def face_owners(tets, faces, star_start, star_tets, local):
+    """For each triangle of faces (B, 3): the first tet (in the star of its first vertex, from
+    vertex_stars) holding all three vertices, and which of its faces it is (k: the face
+    opposite the tet's vertex k); (-1, -1) if none."""
+    owner = np.full(faces.shape[0], -1, dtype=np.int64)
+    which = np.full(faces.shape[0], -1, dtype=np.int8)
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        i = local[a]
+        for s in range(star_start[i], star_start[i + 1]):
+            t = star_tets[s]
+            held = 0
+            other = -1
+            for j in range(4):
+                w = tets[t, j]
+                if w == a or w == b or w == c:
+                    held += 1
+                else:
+                    other = j
+            if held == 3:
+                owner[f], which[f] = t, other
+                break
+    return owner, which
+
+
 def boundary_faces(tets: np.ndarray, neighbour: np.ndarray) -> np.ndarray:
     """Boundary triangles (B, 3), oriented outward, of tets with the given face neighbours."""
     t, k = np.nonzero(neighbour < 0)
