@@ -182,3 +182,9 @@ def test_a_box_comes_out_exactly():
     assert np.sort(np.bincount(patches.patches, weights=areas)[1:]) == pytest.approx([2, 2, 3, 3, 6, 6], rel=1e-6)
     assert sharp.report.mesh_volume == pytest.approx(6.0, rel=1e-6)
     assert abs(result.report.mesh_volume - 6.0) > 1e-3
+
+
+def test_a_result_without_its_surface_says_what_to_call():
+    result = paroct.mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), size=0.25)
+    with pytest.raises(paroct.ParoctError, match="no surface"):
+        paroct.MeshResult(result.mesh, result.report).with_sharp_edges()

@@ -172,7 +172,12 @@ def _tagged_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, fea
     known: the boundary triangles (B, 3) if known (MeshResult.boundary_faces): their tets are
     then found in the stars of their vertices, one pass over the tets instead of matching
     every face (fea_part at diag/40: 141 ms)."""
-    labels, names, feature_angle = surface_labels(surface, feature_angle)
+    return tag_boundary(points, tets, surface, *surface_labels(surface, feature_angle), known)
+
+
+def tag_boundary(points: np.ndarray, tets: np.ndarray, surface: Surface, labels: np.ndarray, names: tuple[str, ...],
+                 feature_angle: float | None, known: np.ndarray | None = None) -> BoundaryPatches:
+    """_tagged_boundary with the surface's labels given (surface_labels' three results)."""
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     if known is None:
         owner, face = np.nonzero(match_faces(tets)[0] < 0)

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from . import rays
-from .boundary import BoundaryPatches, _tagged_boundary, surface_labels
+from .boundary import BoundaryPatches, _tagged_boundary, surface_labels, tag_boundary
 from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
@@ -125,10 +125,13 @@ class MeshResult:
         on: the input's named groups if it has them and feature_angle is None, else the
         surface split at edges sharper than ``feature_angle`` degrees (default
         DEFAULT_FEATURE_ANGLE; boundary.boundary_patches)."""
+        return _tagged_boundary(self.mesh.points, self.mesh.tets, self._surface(), feature_angle, self.boundary_faces)
+
+    def _surface(self) -> Surface:
         if self.surface is None:
             raise ParoctError("this result has no surface to take the patches from; call "
                               "paroct.boundary_patches(points, tets, surface) instead")
-        return _tagged_boundary(self.mesh.points, self.mesh.tets, self.surface, feature_angle, self.boundary_faces)
+        return self.surface
 
     def with_sharp_edges(self, feature_angle: float | None = None) -> MeshResult:
         """A new result whose boundary vertices beside the surface's sharp edges and corners
@@ -137,8 +140,9 @@ class MeshResult:
         boundary_patches(feature_angle) tags: the input's named groups, or the surface split
         at feature_angle degrees (default 40).  The report's angles, 3r/R and volume are
         measured again, and a note says how many vertices moved."""
-        patches = self.boundary_patches(feature_angle)
-        labels, _, _ = surface_labels(self.surface, feature_angle)
+        labelled = surface_labels(self._surface(), feature_angle)
+        patches = tag_boundary(self.mesh.points, self.mesh.tets, self.surface, *labelled, self.boundary_faces)
+        labels = labelled[0]
         snapped = snap_to_features(self.mesh.points, self.mesh.tets, patches, self.surface, labels, self.report.size)
         report = dataclasses.replace(self.report, warnings=list(self.report.warnings), notes=list(self.report.notes),
                                      stage_seconds=dict(self.report.stage_seconds))

@@ -99,15 +99,17 @@ def snap_to_features(points: np.ndarray, tets: np.ndarray, boundary: BoundaryPat
     those patches (labels (F,): the patch of each surface triangle, as boundary was tagged),
     where within reach (model units) and where the guard allows (see the module's docstring).
     Returns the new points; the arrays given are not changed."""
-    curves = feature_curves(surface, labels)
-    vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
     points = np.array(points, dtype=np.float64)  # a copy: moved in place below
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
     width = np.int64(max(int(boundary.n_patches), 1) + 1)
     touching = np.unique(boundary.faces.astype(np.int64).ravel() * width + np.repeat(boundary.patches, 3))
     owner, patch = touching // width, (touching % width).astype(np.int32)
     first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
     count = np.diff(np.r_[first, owner.size])
+    if not (count >= 2).any():  # no seam: a smooth part (a scan at 40 degrees), nothing to move
+        return SnappedVertices(points, np.zeros(0, dtype=np.int64), 0)
+    curves = feature_curves(surface, labels)
+    vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
 
     # Corners: each surface corner takes the nearest vertex bordering three or more patches.
     multi = owner[first[count >= 3]]
