@@ -75,9 +75,8 @@ def feature_curves(surface: Surface, labels: np.ndarray) -> FeatureCurves:
 
 def _meeting_vertices(vertex: np.ndarray, label: np.ndarray, at_least: int) -> np.ndarray:
     """The distinct vertices among vertex (K,) that come with at least at_least distinct labels (K,)."""
-    pairs = np.unique(vertex.astype(np.int64) * (np.int64(label.max(initial=0)) + 1) + label)
-    owners = pairs // (np.int64(label.max(initial=0)) + 1)
-    ids, counts = np.unique(owners, return_counts=True)
+    width = np.int64(label.max(initial=0)) + 1
+    ids, counts = np.unique(np.unique(vertex.astype(np.int64) * width + label) // width, return_counts=True)
     return ids[counts >= at_least]
 
 
