@@ -221,3 +221,15 @@ def test_groups_given_with_arrays_or_a_hand_made_surface_reach_the_patches():
         patches = result.boundary_patches()
         assert patches.names == ("ends", "sides") and set(patches.patches.tolist()) == {1, 2}
         assert np.array_equal(result.surface.face_groups, groups)
+
+
+def test_cli_info_describes_the_surface_and_its_groups(named_box, capsys):
+    path, _ = named_box
+    assert main(["info", str(path), "--size", "0.1"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].endswith("12 triangles, 8 vertices, 1 shell, genus 0") and out[1] == "volume 6, area 22"
+    assert "named groups: 6 (paroct mesh --patches writes them as the patches)" in out
+    assert "  3 'front face': 2 triangles" in out
+    assert "at 40 degrees: 6 patches, 12 edges between them, 8 corners" in out
+    assert main(["info", str(path), "--divisions", "0"]) == 2
+    assert "divisions" in capsys.readouterr().err

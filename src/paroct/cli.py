@@ -63,7 +63,7 @@ def _one_line(text: object) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``paroct`` command (subcommands mesh, check, paper-table)."""
+    """The argument parser of the ``paroct`` command (subcommands mesh, check, info, paper-table)."""
     parser = _Parser(prog="paroct", description="Tetrahedral meshes of closed solids from Todd's fat (BCC) triangulation.")
     parser.add_argument("--version", action="version", version=f"paroct {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -115,6 +115,18 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--against", metavar="SURFACE", help="the closed surface the mesh should fill")
     c.set_defaults(run=_run_check)
 
+    i = sub.add_parser("info", help="describe a surface before meshing it",
+                       description="Describe the solid bounded by SURFACE: its shells, genus, volume and box, the "
+                       "named groups it holds (the patches --patches writes), its patches and corners at a feature "
+                       "angle, and the tets and memory a mesh at the size would take (upper estimates).")
+    i.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off or .ply")
+    sized = i.add_mutually_exclusive_group()
+    sized.add_argument("--size", type=float, metavar="H", help="finest long edge, as for mesh")
+    sized.add_argument("--divisions", type=float, metavar="N", help="size = bounding-box diagonal / N (default 40)")
+    i.add_argument("--feature-angle", type=float, default=DEFAULT_FEATURE_ANGLE, metavar="ANGLE",
+                   help=f"split the surface into patches at edges sharper than ANGLE degrees (default {DEFAULT_FEATURE_ANGLE:g})")
+    i.set_defaults(run=_run_info)
+
     p = sub.add_parser("paper-table", help="recompute the seed paper's Table 1, with errata",
                        description="Recompute the seed paper's Table 1 and list its errata.")
     p.set_defaults(run=_run_paper_table)
@@ -133,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args = parser.parse_args(None if argv is None else [os.fspath(a) if isinstance(a, os.PathLike) else a
                                                                  for a in argv])
             if args.command is None:
-                raise _UsageError("choose a command: mesh, check or paper-table (see paroct --help)")
+                raise _UsageError("choose a command: mesh, check, info or paper-table (see paroct --help)")
             return args.run(args)
     except (_UsageError, ParoctError) as exc:
         _err(f"error: {_one_line(exc)}")
@@ -255,6 +267,42 @@ def _kernels_cached() -> bool:
     cache_dir = os.environ.get("NUMBA_CACHE_DIR")
     folder = Path(cache_dir) if cache_dir else Path(__file__).resolve().parent / "__pycache__"
     return folder.is_dir() and any(folder.rglob("stuffing*.nbi"))
+
+
+def _run_info(args: argparse.Namespace) -> int:
+    from .boundary import surface_patches
+    from .mesher import BYTES_PER_TET, estimate_tets, resolve_size
+    from .sharp import feature_curves
+    from .sizing import size_field
+    from .surface import load_surface
+
+    surface = load_surface(args.surface)
+    size = resolve_size(surface, args.size, args.divisions)
+    lo, hi = surface.bbox_min, surface.bbox_max
+    shells = "1 shell" if surface.components == 1 else f"{surface.components} shells"
+    lines = [f"{args.surface}: {len(surface.faces)} triangles, {len(surface.vertices)} vertices, {shells}, "
+             f"genus {surface.genus}",
+             f"volume {surface.volume:.6g}, area {surface.area:.6g}",
+             f"box ({lo[0]:.6g}, {lo[1]:.6g}, {lo[2]:.6g}) .. ({hi[0]:.6g}, {hi[1]:.6g}, {hi[2]:.6g}), "
+             f"diagonal {surface.diagonal:.6g}"]
+    if surface.face_groups is None:
+        lines.append("named groups: none (paroct mesh --patches splits at the feature angle)")
+    else:
+        counts = np.bincount(surface.face_groups, minlength=len(surface.group_names))
+        lines.append(f"named groups: {len(surface.group_names)} (paroct mesh --patches writes them as the patches)")
+        lines += [f"  {g} {name!r}: {n} triangles" for g, (name, n) in
+                  enumerate(zip(surface.group_names[:_LISTED_PATCHES], counts), start=1)]
+        if len(surface.group_names) > _LISTED_PATCHES:
+            lines.append(f"  ... and {len(surface.group_names) - _LISTED_PATCHES} more")
+    labels = surface_patches(surface, args.feature_angle)
+    curves = feature_curves(surface, labels)
+    lines.append(f"at {args.feature_angle:g} degrees: {int(labels.max(initial=0))} patches, {len(curves.segments)} "
+                 f"edges between them, {len(curves.corners)} corners")
+    tets = estimate_tets(surface, size_field(size))
+    lines.append(f"size {size:.6g} (diagonal / {surface.diagonal / size:.4g}): at most about {tets:.3g} tets and "
+                 f"{tets * BYTES_PER_TET / 2**30:.3g} GiB (graded, max_size 8 x size)")
+    print("\n".join(lines))
+    return EXIT_OK
 
 
 def _run_check(args: argparse.Namespace) -> int:
