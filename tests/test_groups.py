@@ -166,6 +166,7 @@ def test_groups_follow_the_triangles_through_welding_and_union():
     (np.zeros(12), ("a",), "expected \\(12,\\) integers"),
     (None, ("a",), "1 group names but no face_groups"),
     (np.zeros(12, int), (1,), "group_names must be strings"),
+    (np.zeros(12, int), "ab", "group_names must be strings"),
 ])
 def test_bad_groups_are_refused_saying_why(groups, names, match):
     faces = SIDE_FACES.reshape(-1, 3)

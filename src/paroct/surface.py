@@ -79,8 +79,8 @@ def _checked_groups(face_groups, group_names, n_faces: int, label: str) -> tuple
         if len(group_names):
             raise ParoctError(f"{label}: {len(group_names)} group names but no face_groups")
         return None, ()
-    names = tuple(group_names)
-    if not all(isinstance(name, str) for name in names):
+    names = () if isinstance(group_names, str) else tuple(group_names)  # a str is no sequence of names
+    if isinstance(group_names, str) or not all(isinstance(name, str) for name in names):
         raise ParoctError(f"{label}: group_names must be strings")
     groups = np.asarray(face_groups)
     if groups.shape != (n_faces,) or (groups.size and not np.issubdtype(groups.dtype, np.integer)):
