@@ -165,8 +165,8 @@ def test_groups_follow_the_triangles_through_welding_and_union():
     (np.full(12, 1), ("a",), r"face_groups span 1 .. 1, but len\(group_names\) = 1"),
     (np.zeros(12), ("a",), "expected \\(12,\\) integers"),
     (None, ("a",), "1 group names but no face_groups"),
-    (np.zeros(12, int), (1,), "group_names must be strings"),
-    (np.zeros(12, int), "ab", "group_names must be strings"),
+    (np.zeros(12, int), (1,), "group_names must be a sequence of strings"),
+    (np.zeros(12, int), "ab", "group_names must be a sequence of strings"),
 ])
 def test_bad_groups_are_refused_saying_why(groups, names, match):
     faces = SIDE_FACES.reshape(-1, 3)

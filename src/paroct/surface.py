@@ -81,7 +81,7 @@ def _checked_groups(face_groups, group_names, n_faces: int, label: str) -> tuple
         return None, ()
     names = () if isinstance(group_names, str) else tuple(group_names)  # a str is no sequence of names
     if isinstance(group_names, str) or not all(isinstance(name, str) for name in names):
-        raise ParoctError(f"{label}: group_names must be strings")
+        raise ParoctError(f"{label}: group_names must be a sequence of strings (one a group)")
     groups = np.asarray(face_groups)
     if groups.shape != (n_faces,) or (groups.size and not np.issubdtype(groups.dtype, np.integer)):
         raise ParoctError(f"{label}: face_groups.shape = {groups.shape}, dtype {groups.dtype}; expected ({n_faces},) integers")
