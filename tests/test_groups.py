@@ -232,5 +232,19 @@ def test_cli_info_describes_the_surface_and_its_groups(named_box, capsys):
     assert "named groups: 6 (paroct mesh --patches writes them as the patches)" in out
     assert "  3 'front face': 2 triangles" in out
     assert "at 40 degrees: 6 patches, 12 edges between them, 8 corners" in out
+    assert out[-1] == "no wall or gap thinner than 2 x size = 0.2 found along the lattice rows"
     assert main(["info", str(path), "--divisions", "0"]) == 2
     assert "divisions" in capsys.readouterr().err
+
+
+def test_cli_info_names_the_thinnest_wall(tmp_path, capsys):
+    """A 1 x 1 x 0.05 plate at size 0.1: its thickness is the thinnest wall."""
+    path = tmp_path / "plate.stl"
+    plate = manifold3d.Manifold.cube([1.0, 1.0, 0.05]).to_mesh64()
+    vertices, faces = np.asarray(plate.vert_properties)[:, :3], np.asarray(plate.tri_verts)
+    path.write_text("solid plate\n" + "".join(
+        "facet normal 0 0 0\nouter loop\n" + "".join("vertex %.17g %.17g %.17g\n" % tuple(vertices[v]) for v in f)
+        + "endloop\nendfacet\n" for f in faces) + "endsolid plate\n")
+    assert main(["info", str(path), "--size", "0.1"]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.startswith("thinner than 2 x size = 0.2: thinnest wall 0.05 near (")

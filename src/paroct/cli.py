@@ -118,7 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="describe a surface before meshing it",
                        description="Describe the solid bounded by SURFACE: its shells, genus, volume and box, the "
                        "named groups it holds (the patches --patches writes), its patches and corners at a feature "
-                       "angle, and the tets and memory a mesh at the size would take (upper estimates).")
+                       "angle, the tets and memory one pass at the size would take (an upper estimate), and the "
+                       "walls and gaps thinner than twice the size.")
     i.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off or .ply")
     sized = i.add_mutually_exclusive_group()
     sized.add_argument("--size", type=float, metavar="H", help="finest long edge, as for mesh")
@@ -299,10 +300,35 @@ def _run_info(args: argparse.Namespace) -> int:
     lines.append(f"at {args.feature_angle:g} degrees: {int(labels.max(initial=0))} patches, {len(curves.segments)} "
                  f"edges between them, {len(curves.corners)} corners")
     tets = estimate_tets(surface, size_field(size))
-    lines.append(f"size {size:.6g} (diagonal / {surface.diagonal / size:.4g}): at most about {tets:.3g} tets and "
-                 f"{tets * BYTES_PER_TET / 2**30:.3g} GiB (graded, max_size 8 x size)")
+    lines.append(f"size {size:.6g} (diagonal / {surface.diagonal / size:.4g}): one pass at this size makes at most "
+                 f"about {tets:.3g} tets in {tets * BYTES_PER_TET / 2**30:.3g} GiB (graded, max_size 8 x size)")
+    lines.append(_thin_places(surface, size))
     print("\n".join(lines))
     return EXIT_OK
+
+
+def _thin_places(surface, size: float) -> str:
+    """The thinnest walls and gaps under 2 x size that the lattice rows at size find with their
+    two sides facing squarely (those mesh() refines near, when the mesh at size loses them)."""
+    from . import rays
+    from .features import thin_features
+    from .frame import EDGE_DIRECTIONS, fat_frame
+    from .mesher import THIN_FACING
+
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    crossings = {d: rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
+    samples = thin_features(frame, crossings, surface.vertices, faces).facing_below(THIN_FACING)
+    found = []
+    for walls, what in ((True, "wall"), (False, "gap")):
+        hit = samples.thinnest(walls)
+        if hit is not None and hit[0] < 2 * size:
+            found.append(f"{what} {hit[0]:.4g} near ({hit[1][0]:.4g}, {hit[1][1]:.4g}, {hit[1][2]:.4g})")
+    if not found:
+        return f"no wall or gap thinner than 2 x size = {2 * size:.4g} found along the lattice rows"
+    return (f"thinner than 2 x size = {2 * size:.4g}: thinnest {', thinnest '.join(found)}; if a pass at this size "
+            "loses them, paroct mesh refines near them, at more tets than the estimate above")
 
 
 def _run_check(args: argparse.Namespace) -> int:
