@@ -248,3 +248,41 @@ def test_cli_info_names_the_thinnest_wall(tmp_path, capsys):
     assert main(["info", str(path), "--size", "0.1"]) == 0
     last = capsys.readouterr().out.splitlines()[-1]
     assert last.startswith("thinner than 2 x size = 0.2: thinnest wall 0.05 near (")
+
+
+def test_gmsh_surfaces_are_read_with_their_groups(tmp_path):
+    """A Gmsh surface mesh: with physical surfaces and their names (the sides as named groups,
+    the meshed box's patches named so); binary, with geometrical surfaces only (the CAD faces,
+    surface_<tag>) and quads, split in two.  (meshio writes MSH 4.1 without physical groups;
+    Gmsh's own 4.1 files, with them, read the same: checked by hand with gmsh 4.15.)"""
+    faces = SIDE_FACES.reshape(-1, 3)
+    named = meshio.Mesh(BOX_V, [("triangle", faces)],
+                        cell_data={"gmsh:physical": [np.repeat(np.arange(1, 7), 2)],
+                                   "gmsh:geometrical": [np.repeat(np.arange(1, 7), 2)]},
+                        field_data={name: np.array([p, 2]) for p, name in enumerate(NAMES, start=1)})
+    path = tmp_path / "box22.msh"
+    meshio.write(path, named, file_format="gmsh22", binary=False)
+    read = read_surface_file(path)
+    assert read.group_names == tuple(NAMES) and np.array_equal(read.face_groups, np.repeat(np.arange(6), 2))
+    result = paroct.mesh(path, size=0.2)
+    assert result.surface.volume == pytest.approx(6.0, rel=1e-12)
+    assert result.boundary_patches().names == tuple(NAMES)
+
+    quads = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
+    cad = meshio.Mesh(BOX_V, [("quad", quads)], cell_data={"gmsh:geometrical": [np.arange(11, 17)]})
+    path = tmp_path / "box_cad.msh"
+    meshio.write(path, cad, file_format="gmsh22", binary=True)
+    read = read_surface_file(path)
+    assert read.faces.shape == (12, 3) and read.group_names == tuple(f"surface_{t}" for t in range(11, 17))
+    assert load_surface(path).volume == pytest.approx(6.0, rel=1e-12)
+
+
+def test_gmsh_files_without_a_surface_or_damaged_are_refused(tmp_path):
+    tet = meshio.Mesh(BOX_V, [("tetra", np.array([[0, 1, 3, 4]]))])
+    path = tmp_path / "volume.msh"
+    meshio.write(path, tet, file_format="gmsh22", binary=False)
+    with pytest.raises(ParoctError, match=r"no triangles or quads \(it holds tetra\): give paroct the part's surface"):
+        load_surface(path)
+    path.write_bytes(b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\nxx\n")
+    with pytest.raises(ParoctError, match=r"as MSH: not a Gmsh file, or a damaged one \(meshio: "):
+        load_surface(path)

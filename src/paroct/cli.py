@@ -69,8 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     m = sub.add_parser("mesh", help="fill a closed surface with tets", description="Fill the solid bounded by SURFACE "
-                       "(STL, OBJ, OFF, PLY) with fat-lattice tets and write them to OUT.")
-    m.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off or .ply")
+                       "(STL, OBJ, OFF, PLY, Gmsh MSH) with fat-lattice tets and write them to OUT.")
+    m.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off, .ply or .msh (a Gmsh surface mesh)")
     m.add_argument("-o", "--output", metavar="OUT",
                    help="output mesh; format by extension (.vtu, .msh, .mesh, .inp, .vtk, ...); "
                         "default: SURFACE's name with .vtu in the current folder")
@@ -120,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "named groups it holds (the patches --patches writes), its patches and corners at a feature "
                        "angle, the tets and memory one pass at the size would take (an upper estimate), and the "
                        "walls and gaps thinner than twice the size.")
-    i.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off or .ply")
+    i.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off, .ply or .msh (a Gmsh surface mesh)")
     sized = i.add_mutually_exclusive_group()
     sized.add_argument("--size", type=float, metavar="H", help="finest long edge, as for mesh")
     sized.add_argument("--divisions", type=float, metavar="N", help="size = bounding-box diagonal / N (default 40)")

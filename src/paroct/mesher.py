@@ -254,7 +254,7 @@ def mesh(
 ) -> MeshResult:
     """Fill a closed solid with graded fat-lattice tets, the boundary stuffed onto its surface.
 
-    source: surface file path (STL, OBJ, OFF, PLY), manifold3d.Manifold, (vertices, faces)
+    source: surface file path (STL, OBJ, OFF, PLY, MSH), manifold3d.Manifold, (vertices, faces)
     or a loaded Surface.  size: finest long edge in model units, used all along the boundary
     (default: bounding-box diagonal / divisions, divisions default 40).  max_size: largest
     long edge inside (default 8 * size, rounded down to a power-of-two multiple of size;

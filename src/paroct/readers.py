@@ -2,9 +2,10 @@
 
 Each reader returns vertices (V, 3) and triangles (F, 3) int64, polygons split into fans,
 and the named groups the file puts its triangles in where it has two or more (the solids
-of an ASCII STL, the ``g`` or ``o`` statements of an OBJ: CAD programs export a part's faces
-or bodies so, and they are the patches boundary conditions go on), or raises ParoctError
-saying what is wrong and where.  paroct reads these formats itself:
+of an ASCII STL, the ``g`` or ``o`` statements of an OBJ, the physical or CAD surfaces of a
+Gmsh MSH: CAD programs export a part's faces or bodies so, and they are the patches
+boundary conditions go on), or raises ParoctError saying what is wrong and where.  MSH goes
+through meshio, the rest is read here.  paroct reads these formats itself:
 meshio's readers refused valid files (OBJ with negative or ``v/vt`` indices, PLY with its
 properties in another order or its list named ``vertex_index``, OFF with quads or colours,
 STL with a byte-order mark), and walked a binary PLY whose header claimed 2e9 faces for
@@ -24,7 +25,7 @@ import numpy as np
 from .errors import ParoctError
 
 #: Surface formats paroct reads, by file extension.
-SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply")
+SURFACE_EXTENSIONS = (".stl", ".obj", ".off", ".ply", ".msh")
 
 
 class _Malformed(Exception):
@@ -45,7 +46,7 @@ class SurfaceFile(NamedTuple):
 
 def read_surface_file(path: str | os.PathLike) -> SurfaceFile:
     """The vertices, triangles and named groups (SurfaceFile) of a surface file (STL, OBJ,
-    OFF, PLY).  Raises ParoctError for a missing or unreadable file, something that is not a
+    OFF, PLY, MSH).  Raises ParoctError for a missing or unreadable file, something that is not a
     regular file (a folder, a pipe), an unknown extension or a malformed file."""
     path = Path(path)
     regular_file(path, "a surface file")
@@ -53,7 +54,7 @@ def read_surface_file(path: str | os.PathLike) -> SurfaceFile:
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
     try:
-        data = path.read_bytes()
+        data = path if ext in _READ_FROM_PATH else path.read_bytes()
     except OSError as exc:
         raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
@@ -583,4 +584,63 @@ def _ply_binary(body: bytes, elements: list, order: str) -> dict:
     return out
 
 
-_READERS = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply}
+# --- Gmsh MSH ----------------------------------------------------------------------------
+
+def _read_msh(path: Path) -> SurfaceFile:
+    """A Gmsh surface mesh (MSH 2.2 or 4.1, ASCII or binary, read by meshio): its triangles
+    (quads split in two), grouped by physical surface (named as the file's $PhysicalNames
+    name them, else ``physical_<tag>``; elements in none are ``default``), or, in a file with
+    no physical groups, by geometrical surface (``surface_<tag>``: the CAD faces).  Other
+    elements (points, lines, a volume's tets) are ignored."""
+    import contextlib
+    import io
+    import warnings
+
+    from meshio import gmsh
+
+    try:
+        # The format's reader itself (meshio.read prints a reader's complaint and exits), its
+        # warnings about damaged sections (printed to stderr) kept off the user's terminal.
+        with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()), \
+                contextlib.redirect_stdout(io.StringIO()):
+            warnings.simplefilter("ignore")
+            mesh = gmsh.read(str(path))
+    except Exception as exc:  # meshio raises anything on a malformed file: say what it said
+        said = str(exc).strip().splitlines()
+        raise _Malformed(f"not a Gmsh file, or a damaged one (meshio: {type(exc).__name__}: "
+                         f"{said[0] if said else 'malformed'})") from None
+    names_of = {int(tag): name for name, (tag, dim) in
+                ((name, np.asarray(v).ravel()[:2]) for name, v in mesh.field_data.items()) if int(dim) == 2}
+    physical, geometrical = mesh.cell_data.get("gmsh:physical"), mesh.cell_data.get("gmsh:geometrical")
+    by_physical = physical is not None and any(
+        block.type in ("triangle", "quad") and np.any(np.asarray(tags) != 0) for block, tags in zip(mesh.cells, physical))
+    triangles, names = [], []
+    for k, block in enumerate(mesh.cells):
+        if block.type not in ("triangle", "quad"):
+            continue
+        rows = np.asarray(block.data, dtype=np.int64)
+        if block.type == "quad":
+            rows = _fans_of_rows(rows)
+        tags = (physical if by_physical else geometrical)[k] if (physical if by_physical else geometrical) else None
+        if tags is None:
+            names += ["default"] * len(rows)
+        else:
+            tags = np.asarray(tags).ravel()
+            tags = np.repeat(tags, 2) if block.type == "quad" else tags
+            names += [("default" if t == 0 else names_of.get(int(t), f"physical_{t}")) if by_physical
+                      else f"surface_{t}" for t in tags.tolist()]
+        triangles.append(rows)
+    if not triangles:
+        kinds = sorted({block.type for block in mesh.cells})
+        raise _Malformed(f"no triangles or quads (it holds {', '.join(kinds) or 'no elements'}): give paroct the "
+                         "part's surface mesh (in Gmsh, its 2D mesh)")
+    faces = np.concatenate(triangles)
+    vertices = np.asarray(mesh.points, dtype=np.float64)
+    if vertices.ndim != 2 or vertices.shape[1] < 3:
+        vertices = np.column_stack([vertices.reshape(len(vertices), -1), np.zeros((len(vertices), 1))])[:, :3]
+    return SurfaceFile(np.ascontiguousarray(vertices[:, :3]), faces, *_named_groups(names))
+
+
+_READERS = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".msh": _read_msh}
+#: Formats whose reader opens the file itself (meshio's), given its path instead of its bytes.
+_READ_FROM_PATH = (".msh",)

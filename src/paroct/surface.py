@@ -687,7 +687,7 @@ def _genus(fans: int, faces: np.ndarray, n_shells: int) -> int:
 def load_surface(source: SurfaceSource) -> Surface:
     """The validated closed surface of a solid.
 
-    source: a path to an STL, OBJ, OFF or PLY file; a ``manifold3d.Manifold``; or a
+    source: a path to an STL, OBJ, OFF, PLY or Gmsh MSH file; a ``manifold3d.Manifold``; or a
     ``(vertices (V, 3), faces (F, 3))`` pair.  Exactly coincident vertices are merged,
     degenerate triangles dropped, solids touching along an edge or at a corner kept apart
     (as the mesh keeps them), overlapping shells unioned.  Raises ParoctError with
