@@ -92,15 +92,16 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar=("X", "Y", "Z", "R", "H"), help="long edge at most H within R of (X, Y, Z) (repeatable)")
     m.add_argument("--patches", type=float, nargs="?", const=_INPUT_GROUPS, metavar="ANGLE",
                    help="also write the boundary triangles, tagged by surface patch: the input's named groups (the "
-                        "solids of an ASCII STL, an OBJ's g groups) if it has them, else the surface split at edges "
+                        "solids of an ASCII STL, an OBJ's g groups, a Gmsh file's physical surfaces) if it has them, "
+                        "else the surface split at edges "
                         f"sharper than {DEFAULT_FEATURE_ANGLE:g} degrees; with ANGLE, split at ANGLE degrees whatever "
                         "the groups.  Gmsh physical groups in .msh, surfaces and node sets in .inp, references in "
                         ".mesh, cell data boundary_patch elsewhere")
     m.add_argument("--sharp-edges", type=float, nargs="?", const=_INPUT_GROUPS, metavar="ANGLE",
                    help="move the boundary vertices beside sharp edges and corners onto them, as far as the tets "
-                        "around each keep dihedral angles in [15, 150] degrees: the borders of the patches --patches "
-                        "names (the input's named groups, else edges sharper than ANGLE degrees, default "
-                        f"{DEFAULT_FEATURE_ANGLE:g})")
+                        "around each keep dihedral angles in [15, 150] degrees; the edges are the borders of the "
+                        "patches --patches would write (the input's named groups, else the surface split at "
+                        f"{DEFAULT_FEATURE_ANGLE:g} degrees; with ANGLE, split at ANGLE degrees)")
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
     talk = m.add_mutually_exclusive_group()
