@@ -286,3 +286,16 @@ def test_gmsh_files_without_a_surface_or_damaged_are_refused(tmp_path):
     path.write_bytes(b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\nxx\n")
     with pytest.raises(ParoctError, match=r"as MSH: not a Gmsh file, or a damaged one \(meshio: "):
         load_surface(path)
+
+
+def test_a_paroct_msh_with_patches_meshes_again_with_its_named_patches(tmp_path, named_box, capsys):
+    """paroct's own .msh written with --patches holds the boundary triangles in named physical
+    groups: read as a surface (its tets ignored), it meshes again with the same patch names."""
+    path, _ = named_box
+    first = tmp_path / "first.msh"
+    assert main(["mesh", str(path), "-o", str(first), "--size", "0.2", "--patches", "-q"]) == 0
+    read = read_surface_file(first)
+    assert read.group_names == tuple(NAMES)
+    again = paroct.mesh(first, size=0.2)
+    assert again.surface.volume == pytest.approx(paroct.mesh(path, size=0.2).report.mesh_volume, rel=1e-12)
+    assert again.boundary_patches().names == tuple(NAMES)
