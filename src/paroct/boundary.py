@@ -3,14 +3,16 @@ triangles tagged with the patch they lie on, so that boundary conditions can be 
 (Gmsh physical groups, Abaqus surfaces and node sets, Medit references: see io.write_mesh).
 
 Where the input names groups of its triangles (the solids of an ASCII STL, the ``g``
-statements of an OBJ: CAD programs export faces or bodies so), the groups are the patches,
-with their names.  Otherwise, or when a feature angle is asked for, a patch is a set of
-surface triangles joined across edges where the surface turns by less than the feature
-angle (the angle between the two triangles' normals), the usual rule of CAD and of Gmsh's
-``ClassifySurfaces``: a box has 6 patches, a cylinder 3 at 40 degrees.  Each boundary triangle of the mesh takes the patch of the input triangle nearest its centroid
-(exact point-to-triangle distances, check.nearest_triangles).  Stuffing cuts sharp edges
-(by less than one size), so the tagged faces along a sharp edge split between its two
-patches where the cut falls, not on the edge itself.
+statements of an OBJ, the physical surfaces of a Gmsh mesh: CAD programs export faces or
+bodies so), the groups are the patches, with their names.  Otherwise, or when a feature
+angle is asked for, a patch is a set of surface triangles joined across edges where the
+surface turns by less than the feature angle (the angle between the two triangles'
+normals), the usual rule of CAD and of Gmsh's ``ClassifySurfaces``: a box has 6 patches, a
+cylinder 3 at 40 degrees.  Each boundary triangle of the mesh takes the patch of the input
+triangle nearest its centroid (exact point-to-triangle distances, check.nearest_triangles).
+Stuffing cuts sharp edges (by less than one size), so the tagged faces along a sharp edge
+split between its two patches where the cut falls, not on the edge itself, unless the
+boundary is moved onto the edges after (MeshResult.with_sharp_edges, sharp.py).
 """
 
 from __future__ import annotations
