@@ -724,6 +724,12 @@ def load_surface(source: SurfaceSource) -> Surface:
         return surface_from_arrays(source[0], source[1])
     if isinstance(source, (str, os.PathLike)):
         read = read_surface_file(source)
-        return surface_from_arrays(read.vertices, read.faces, str(source), face_groups=read.face_groups,
-                                   group_names=read.group_names)
+        try:
+            return surface_from_arrays(read.vertices, read.faces, str(source), face_groups=read.face_groups,
+                                       group_names=read.group_names)
+        except ParoctError as exc:
+            if os.fspath(source).lower().endswith(".msh") and "open surface" in str(exc):
+                raise ParoctError(f"{exc}; a Gmsh file holds only the elements of its physical groups when it has "
+                                  "any: put every surface of the part in one (or set Mesh.SaveAll = 1)") from None
+            raise
     raise ParoctError(f"cannot mesh a {type(source).__name__}: pass a file path, a manifold3d.Manifold or (vertices, faces)")
