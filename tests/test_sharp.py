@@ -215,3 +215,20 @@ def test_csg_parts_stay_valid_and_closed(seed):
     assert (crossing_triangles(sharp.mesh.points, faces, np.arange(len(faces))) < 0).all()
     assert abs(sharp.report.volume_error) <= abs(result.report.volume_error) + 1e-3
     assert sharp.report.min_dihedral >= min(SNAP_MIN_ANGLE, result.report.min_dihedral) - 1e-9
+
+
+def test_half_edge_twins_run_the_other_way():
+    """On a closed surface every half-edge has exactly one twin, running the same edge the other
+    way, and the twin of the twin is itself; a surface with a hole leaves its rim's half-edges
+    without one."""
+    from paroct.topology import half_edge_twins
+
+    surface = paroct.load_surface(DATA / "angle_block.stl")
+    faces = np.asarray(surface.faces, dtype=np.int64)
+    twin = half_edge_twins(faces, surface.vertices.shape[0])
+    h = np.arange(3 * len(faces))
+    start, end = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    assert (twin >= 0).all() and np.array_equal(twin[twin], h)
+    assert np.array_equal(start[twin], end) and np.array_equal(end[twin], start)
+    open_twin = half_edge_twins(faces[1:], surface.vertices.shape[0])
+    assert (open_twin < 0).sum() == 3

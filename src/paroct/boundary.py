@@ -27,7 +27,7 @@ from .check import nearest_triangles, validated_mesh
 from .errors import ParoctError
 from .features import face_normals
 from .surface import Surface, SurfaceSource, load_surface
-from .topology import TET_FACES, edge_bucket_starts, face_owners, match_faces, union, vertex_stars
+from .topology import TET_FACES, face_owners, half_edge_twins, match_faces, union, vertex_stars
 
 #: Default feature angle, degrees: edges where the surface turns by more bound patches.
 DEFAULT_FEATURE_ANGLE = 40.0
@@ -94,9 +94,8 @@ def surface_patches(surface: Surface, feature_angle: float = DEFAULT_FEATURE_ANG
 @nb.njit(cache=True)
 def _patches(vertices, faces, normals, min_cos):
     """surface_patches' kernel over unit normals (F, 3) (zero for zero-area faces): every edge
-    a -> b of a face matched with its twin b -> a (a counting sort of the edges by smaller
-    vertex; a closed oriented surface has exactly one), union-find over the smooth ones, then
-    labels by first face."""
+    a -> b of a face matched with its twin b -> a (topology.half_edge_twins), union-find over
+    the smooth ones, then labels by first face."""
     nf = faces.shape[0]
     nv = vertices.shape[0]
     longest = np.zeros(nf, dtype=np.int64)  # the face's longest edge j, from corner j to j + 1
@@ -109,29 +108,18 @@ def _patches(vertices, faces, normals, min_cos):
                 d += (vertices[q, k] - vertices[p, k]) ** 2
             if d > best:
                 best, longest[f] = d, j
-    start = edge_bucket_starts(faces, nv)
-    fill = start[:-1].copy()
-    slot = np.empty(3 * nf, dtype=np.int64)  # face * 3 + j of each edge occurrence
-    for f in range(nf):
-        for j in range(3):
-            a = min(faces[f, j], faces[f, (j + 1) % 3])
-            slot[fill[a]] = 3 * f + j
-            fill[a] += 1
+    twin = half_edge_twins(faces, nv)
     parent = np.arange(nf)
-    for a in range(nv):
-        for s in range(start[a], start[a + 1]):
-            f, j = slot[s] // 3, slot[s] % 3
-            p, q = faces[f, j], faces[f, (j + 1) % 3]
-            for t in range(start[a], start[a + 1]):  # the twin q -> p
-                g, i = slot[t] // 3, slot[t] % 3
-                if g <= f or faces[g, i] != q or faces[g, (i + 1) % 3] != p:
-                    continue
-                dot = normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1] + normals[f, 2] * normals[g, 2]
-                flat_f = normals[f, 0] == 0 and normals[f, 1] == 0 and normals[f, 2] == 0
-                flat_g = normals[g, 0] == 0 and normals[g, 1] == 0 and normals[g, 2] == 0
-                if (not flat_f and not flat_g and dot > min_cos) or (flat_f and longest[f] == j) \
-                        or (flat_g and longest[g] == i):
-                    union(parent, f, g)
+    for h in range(3 * nf):
+        t = twin[h]
+        if t <= h:  # each edge once, from its half-edge of smaller index
+            continue
+        f, j, g, i = h // 3, h % 3, t // 3, t % 3
+        dot = normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1] + normals[f, 2] * normals[g, 2]
+        flat_f = normals[f, 0] == 0 and normals[f, 1] == 0 and normals[f, 2] == 0
+        flat_g = normals[g, 0] == 0 and normals[g, 1] == 0 and normals[g, 2] == 0
+        if (not flat_f and not flat_g and dot > min_cos) or (flat_f and longest[f] == j) or (flat_g and longest[g] == i):
+            union(parent, f, g)
     labels = np.zeros(nf, dtype=np.int32)
     n_patches = 0
     for f in range(nf):

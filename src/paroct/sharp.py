@@ -32,7 +32,7 @@ import numpy as np
 from .boundary import BoundaryPatches
 from .quality import _tet_measures
 from .surface import Surface
-from .topology import vertex_stars
+from .topology import half_edge_twins, vertex_stars
 
 #: The guard on the tets around a moved vertex (degrees, and 3r/R): stuffing's own bound is
 #: [10.7, 164.8]; stars already beyond keep their worst.
@@ -57,14 +57,15 @@ class FeatureCurves:
 
 def feature_curves(surface: Surface, labels: np.ndarray) -> FeatureCurves:
     """The curves and corners between the patches labels (F,) (from 1) of the surface's
-    triangles.  Each edge of a closed surface has exactly two half-edges; a stable sort of
-    their keys pairs them."""
-    faces = np.asarray(surface.faces, dtype=np.int64)
+    triangles, in the order of their edges' keys (smaller vertex, then larger).  Each edge of
+    a closed surface has exactly two half-edges (topology.half_edge_twins)."""
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     n = np.int64(surface.vertices.shape[0])
+    twin = half_edge_twins(faces, n)
+    first = np.flatnonzero(np.arange(twin.shape[0]) < twin)  # each edge once, from its smaller half-edge
     start, end = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(start, end) * n + np.maximum(start, end)
-    order = np.argsort(key, kind="stable")
-    first, second = order[0::2], order[1::2]
+    first = first[np.argsort(np.minimum(start[first], end[first]) * n + np.maximum(start[first], end[first]))]
+    second = twin[first]
     labels = np.asarray(labels, dtype=np.int32)
     a, b = labels[first // 3], labels[second // 3]
     cut = a != b
