@@ -320,12 +320,7 @@ def _thin_places(surface, size: float) -> str:
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     crossings = {d: rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
-    samples = thin_features(frame, crossings, surface.vertices, faces).facing_below(THIN_FACING)
-    found = []
-    for walls, what in ((True, "wall"), (False, "gap")):
-        hit = samples.thinnest(walls)
-        if hit is not None and hit[0] < 2 * size:
-            found.append(f"{what} {hit[0]:.4g} near ({hit[1][0]:.4g}, {hit[1][1]:.4g}, {hit[1][2]:.4g})")
+    found, _ = thin_features(frame, crossings, surface.vertices, faces).facing_below(THIN_FACING).thinnest_below(2 * size)
     if not found:
         return f"no wall or gap thinner than 2 x size = {2 * size:.4g} found along the lattice rows"
     return (f"thinner than 2 x size = {2 * size:.4g}: thinnest {', thinnest '.join(found)}; if a pass at this size "

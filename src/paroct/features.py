@@ -74,6 +74,17 @@ class ThinFeatures:
         keep = self.facing < limit
         return ThinFeatures(self.thickness[keep], self.points[keep], self.is_wall[keep], self.facing[keep])
 
+    def thinnest_below(self, limit: float) -> tuple[list[str], float]:
+        """The thinnest wall and the thinnest gap under limit, each as text ('wall 0.05 near (x,
+        y, z)'), and the smaller thickness of the two (inf if neither)."""
+        found, smallest = [], np.inf
+        for walls, what in ((True, "wall"), (False, "gap")):
+            hit = self.thinnest(walls)
+            if hit is not None and hit[0] < limit:
+                found.append(f"{what} {hit[0]:.4g} near ({hit[1][0]:.4g}, {hit[1][1]:.4g}, {hit[1][2]:.4g})")
+                smallest = min(smallest, hit[0])
+        return found, smallest
+
     def thinnest(self, walls: bool) -> tuple[float, np.ndarray] | None:
         """The smallest wall (or gap) thickness and where it is, or None if there is none."""
         sel = np.nonzero(self.is_wall == walls)[0]

@@ -803,13 +803,7 @@ def _thin_feature_advice(features: ThinFeatures, h: float, surface: Surface) -> 
     where the rows found none (a part thinner than their spacing is crossed by few or none),
     the solid's mean thickness, twice its volume over its area (a slab's thickness; a rod's
     or ball's is a half and a third of its width), and the size that is half of it."""
-    found = []
-    smallest = np.inf
-    for walls, what in ((True, "wall"), (False, "gap")):
-        hit = features.thinnest(walls)
-        if hit is not None and hit[0] < 2 * h:
-            found.append(f"thinnest {what} {hit[0]:.4g} near ({hit[1][0]:.4g}, {hit[1][1]:.4g}, {hit[1][2]:.4g})")
-            smallest = min(smallest, hit[0])
+    found, smallest = features.thinnest_below(2 * h)
     if not found:
         mean = 2 * surface.volume / surface.area
         if mean / 2 >= h:
@@ -817,7 +811,7 @@ def _thin_feature_advice(features: ThinFeatures, h: float, surface: Surface) -> 
         return (f"no wall or gap thinner than 2 x size = {2 * h:.4g} was found along the lattice rows, but the solid is "
                 f"{mean:.4g} thick on average (twice its volume over its area): size = {mean / 2:.4g} or less would "
                 "put two elements across it")
-    return f"{', '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
+    return f"thinnest {', thinnest '.join(found)}; size = {smallest / 2:.4g} would keep it (now {h:.4g})"
 
 
 #: Rounds of measure-and-refine a locally refined band gets before paroct refines the whole
