@@ -614,31 +614,34 @@ def _read_msh(path: Path) -> SurfaceFile:
     physical, geometrical = mesh.cell_data.get("gmsh:physical"), mesh.cell_data.get("gmsh:geometrical")
     by_physical = physical is not None and any(
         block.type in ("triangle", "quad") and np.any(np.asarray(tags) != 0) for block, tags in zip(mesh.cells, physical))
-    triangles, names = [], []
+    source = physical if by_physical else geometrical
+    triangles, tags = [], []
     for k, block in enumerate(mesh.cells):
         if block.type not in ("triangle", "quad"):
             continue
         rows = np.asarray(block.data, dtype=np.int64)
+        block_tags = np.zeros(len(rows), dtype=np.int64) if source is None else np.asarray(source[k], np.int64).ravel()
         if block.type == "quad":
-            rows = _fans_of_rows(rows)
-        tags = (physical if by_physical else geometrical)[k] if (physical if by_physical else geometrical) else None
-        if tags is None:
-            names += ["default"] * len(rows)
-        else:
-            tags = np.asarray(tags).ravel()
-            tags = np.repeat(tags, 2) if block.type == "quad" else tags
-            names += [("default" if t == 0 else names_of.get(int(t), f"physical_{t}")) if by_physical
-                      else f"surface_{t}" for t in tags.tolist()]
+            rows, block_tags = _fans_of_rows(rows), np.repeat(block_tags, 2)
         triangles.append(rows)
+        tags.append(block_tags)
     if not triangles:
         kinds = sorted({block.type for block in mesh.cells})
         raise _Malformed(f"no triangles or quads (it holds {', '.join(kinds) or 'no elements'}): give paroct the "
                          "part's surface mesh (in Gmsh, its 2D mesh)")
-    faces = np.concatenate(triangles)
-    vertices = np.asarray(mesh.points, dtype=np.float64)
-    if vertices.ndim != 2 or vertices.shape[1] < 3:
-        vertices = np.column_stack([vertices.reshape(len(vertices), -1), np.zeros((len(vertices), 1))])[:, :3]
-    return SurfaceFile(np.ascontiguousarray(vertices[:, :3]), faces, *_named_groups(names))
+    # Names per distinct tag, in order of first appearance, not per triangle.
+    distinct, first, inverse = np.unique(np.concatenate(tags), return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    names = [("default" if t == 0 else names_of.get(int(t), f"physical_{t}")) if by_physical
+             else ("default" if source is None else f"surface_{t}") for t in distinct[order].tolist()]
+    of_distinct, group_names = _named_groups(names)
+    face_groups = None
+    if of_distinct is not None:
+        by_tag = np.empty(distinct.size, dtype=np.int32)
+        by_tag[order] = of_distinct
+        face_groups = by_tag[inverse.ravel()]
+    return SurfaceFile(np.ascontiguousarray(mesh.points[:, :3], dtype=np.float64), np.concatenate(triangles),
+                       face_groups, group_names)
 
 
 _READERS = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".msh": _read_msh}
