@@ -141,9 +141,10 @@ class MeshResult:
         at feature_angle degrees (default 40).  The report's angles, 3r/R and volume are
         measured again, and a note says how many vertices moved."""
         labelled = surface_labels(self._surface(), feature_angle)
-        patches = tag_boundary(self.mesh.points, self.mesh.tets, self.surface, *labelled, self.boundary_faces)
-        labels = labelled[0]
-        snapped = snap_to_features(self.mesh.points, self.mesh.tets, patches, self.surface, labels, self.report.size)
+        tets = np.ascontiguousarray(self.mesh.tets, dtype=np.int64)  # once, for the tagging and the stars
+        patches = tag_boundary(self.mesh.points, tets, self.surface, *labelled, self.boundary_faces)
+        snapped = snap_to_features(self.mesh.points, tets, patches, self.surface, labelled[0], self.report.size)
+        del tets
         report = dataclasses.replace(self.report, warnings=list(self.report.warnings), notes=list(self.report.notes),
                                      stage_seconds=dict(self.report.stage_seconds))
         if self.mesh.tets.shape[0]:
