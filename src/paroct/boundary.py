@@ -79,13 +79,19 @@ class BoundaryPatches:
         return np.split(order, np.searchsorted(self.patches[order], np.arange(2, self.n_patches + 1)))
 
 
+def checked_feature_angle(feature_angle: float) -> float:
+    """feature_angle, or ParoctError unless it is a number of degrees in (0, 180]."""
+    if not (isinstance(feature_angle, (int, float, np.floating)) and 0 < feature_angle <= 180):
+        raise ParoctError(f"feature angle = {feature_angle}: must be a number of degrees in (0, 180]")
+    return feature_angle
+
+
 def surface_patches(surface: Surface, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> np.ndarray:
     """Patch id (F,) int32 of each of the surface's triangles: triangles joined across every
     edge where their unit normals differ by less than ``feature_angle`` degrees (0 < angle <=
     180), numbered 1, 2, ... in the order of each patch's first triangle.  A triangle of zero
     area has no normal: it joins the patch across its longest edge."""
-    if not (isinstance(feature_angle, (int, float, np.floating)) and 0 < feature_angle <= 180):
-        raise ParoctError(f"feature angle = {feature_angle}: must be a number of degrees in (0, 180]")
+    checked_feature_angle(feature_angle)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
     return _patches(vertices, faces, face_normals(vertices, faces), math.cos(math.radians(feature_angle)))

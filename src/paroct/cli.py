@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from . import __version__
-from .boundary import DEFAULT_FEATURE_ANGLE
+from .boundary import DEFAULT_FEATURE_ANGLE, checked_feature_angle
 from .errors import ParoctError
 
 #: --patches given without an angle: the input's named groups where it has them (not a
@@ -168,8 +168,11 @@ def _run_mesh(args: argparse.Namespace) -> int:
 
     source = Path(args.surface)
     out = Path(args.output) if args.output else Path.cwd() / (source.stem + ".vtu")
-    # Refuse a bad output before spending the meshing time.
+    # Refuse a bad output or feature angle before spending the meshing time.
     output_format(out)
+    for angle in (args.patches, args.sharp_edges):
+        if angle is not None and angle is not _INPUT_GROUPS:
+            checked_feature_angle(angle)
     if not out.parent.is_dir():
         raise ParoctError(f"{out}: folder {out.parent} does not exist")
     max_memory = None
