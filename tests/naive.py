@@ -635,3 +635,48 @@ def feature_curves(faces: np.ndarray, labels: np.ndarray) -> tuple[set, set]:
         for v in tri:
             around.setdefault(v, set()).add(int(labels[f]))
     return curves, {v for v, s in around.items() if len(s) >= 3}
+
+
+def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[list[np.ndarray], list[int]]:
+    """Strips by recursion: a triangle with an edge over spacing is cut by the lines parallel
+    to its shortest edge (the first of equal ones, opposite corner a) at k = ceil(longest /
+    spacing) equal steps along the other two, and each strip's triangles cut again.  Returns
+    the pieces and the triangle of each, in order of triangle."""
+    pieces, owner = [], []
+
+    def cut(tri, t):
+        opposite = [float(np.sum((tri[(j + 2) % 3] - tri[(j + 1) % 3]) ** 2)) for j in range(3)]
+        if max(opposite) <= spacing * spacing:
+            pieces.append(tri)
+            owner.append(t)
+            return
+        a = int(np.argmin(opposite))
+        k = max(1, math.ceil(math.sqrt(max(opposite)) / spacing))
+        pa, pb, pc = tri[a], tri[(a + 1) % 3], tri[(a + 2) % 3]
+        p = [pa + (pb - pa) * i / k for i in range(k + 1)]
+        q = [pa + (pc - pa) * i / k for i in range(k + 1)]
+        for i in range(k):
+            cut(np.array([p[i], p[i + 1], q[i + 1]]), t)
+            if i > 0:
+                cut(np.array([p[i], q[i + 1], q[i]]), t)
+
+    for t, tri in enumerate(corners):
+        cut(np.asarray(tri, dtype=float), t)
+    return pieces, owner
+
+
+def largest_principal_curvature(points: np.ndarray, normals: np.ndarray, weights: np.ndarray) -> float:
+    """J's largest singular value for the normals fitted as n(x) = n0 + J (x - x0) over the
+    points' two directions of largest spread, by weighted least squares spelled out: the
+    tangent frame from the points' covariance, then J's 3 x 2 block from the normal equations."""
+    w = weights / weights.sum()
+    x0 = (w[:, None] * points).sum(axis=0)
+    n0 = (w[:, None] * normals).sum(axis=0)
+    dp, dn = points - x0, normals - n0
+    cov = sum(wi * np.outer(d, d) for wi, d in zip(w, dp))
+    lam, vec = np.linalg.eigh(cov)
+    tangent = vec[:, 1:]  # the two directions of largest spread
+    q = dp @ tangent  # (K, 2) tangent coordinates
+    a = sum(wi * np.outer(qi, qi) for wi, qi in zip(w, q))
+    b = sum(wi * np.outer(ni, qi) for wi, ni, qi in zip(w, dn, q))
+    return float(np.linalg.svd(b @ np.linalg.inv(a), compute_uv=False)[0])

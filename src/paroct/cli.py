@@ -82,7 +82,15 @@ def build_parser() -> argparse.ArgumentParser:
                          help="largest long edge inside, rounded down to size * 2^k (default 8 x size)")
     grading.add_argument("--uniform", action="store_true", help="one size everywhere (max size = size)")
     m.add_argument("--min-size", type=float, metavar="H",
-                   help="smallest boundary size that thin walls and gaps may ask for (default size / 16)")
+                   help="smallest boundary size that thin walls and gaps, --curvature and --layers may ask for "
+                        "(default size / 16)")
+    m.add_argument("--curvature", type=float, metavar="N",
+                   help="N elements per full turn of the surface: the boundary refined by halves of size to long "
+                        "edges of at most 2 pi r / N where it bends with radius r (creases of the triangulation and "
+                        "noise finer than the elements ask nothing)")
+    m.add_argument("--layers", type=float, metavar="K",
+                   help="K elements across every wall thinner than K x size: the boundary refined by halves of size "
+                        "to long edges of at most the wall's thickness / K")
     m.add_argument("--keep-size", action="store_true",
                    help="do not refine for thin walls and gaps (only warn when the mesh loses them)")
     m.add_argument("--refine-box", type=float, nargs=7, action="append", default=[],
@@ -163,7 +171,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from .io import output_format, write_mesh
     from .memory import peak_resident, start_peak_count
     from .mesher import mesh, resolve_size
-    from .sizing import Box, Sphere
+    from .sizing import Box, Sphere, positive_number
     from .surface import load_surface
 
     source = Path(args.surface)
@@ -173,6 +181,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
     for angle in (args.patches, args.sharp_edges):
         if angle is not None and angle is not _INPUT_GROUPS:
             checked_feature_angle(angle)
+    for name, value in (("--curvature", args.curvature), ("--layers", args.layers)):
+        if value is not None:
+            positive_number(name, value)
     if not out.parent.is_dir():
         raise ParoctError(f"{out}: folder {out.parent} does not exist")
     max_memory = None
@@ -194,7 +205,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     t_loaded = time.perf_counter()
     max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
     result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
-                  thin_features=not args.keep_size, min_size=args.min_size,
+                  curvature=args.curvature, layers=args.layers, thin_features=not args.keep_size, min_size=args.min_size,
                   max_memory=max_memory, progress=progress if args.verbose else None)
     if args.sharp_edges is not None:
         result = result.with_sharp_edges(None if args.sharp_edges is _INPUT_GROUPS else args.sharp_edges)

@@ -15,11 +15,12 @@ import numba as nb
 import numpy as np
 
 from . import rays
-from .boundary import BoundaryPatches, _tagged_boundary, surface_labels, tag_boundary
+from .boundary import DEFAULT_FEATURE_ANGLE, BoundaryPatches, _tagged_boundary, surface_labels, tag_boundary
 from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
 from .features import ThinFeatures
+from .lfs import FeatureAsks, curvature_asks, merged_asks, no_asks, wall_asks
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
@@ -248,6 +249,8 @@ def mesh(
     max_size: float | None = None,
     regions: Sequence[Region] = (),
     size_function: SizeFunction | None = None,
+    curvature: float | None = None,
+    layers: float | None = None,
     thin_features: bool = True,
     min_size: float | None = None,
     max_memory: int | None = None,
@@ -262,6 +265,14 @@ def mesh(
     max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
     a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
     evaluated at octant corners and centres (both are clamped to at least size).
+    curvature: N elements per full turn of the surface: the boundary refined to long edges of
+    at most 2 pi r / N where it bends with radius r (as Gmsh's Mesh.MeshSizeFromCurvature;
+    lfs.curvature_asks: measured at the scale of each level, so noise finer than the elements
+    and creases of the triangulation ask nothing).  layers: K elements across every wall
+    thinner than K * size, the boundary there refined to long edges of at most its thickness
+    / K (lfs.wall_asks).  Both refine by halves of size, down to min_size (default size /
+    16); the band then changes level, and every tet is measured and mended or refined
+    further as near thin walls, so the dihedral bound holds.
     thin_features: when the mesh loses topology (boundary components, genus), loses or gains
     more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
     thinner than the lattice dropped), the solid is meshed again: if it missed no surface
@@ -285,7 +296,7 @@ def mesh(
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
-    field = size_field(h, max_size, regions, size_function)
+    field = size_field(h, max_size, regions, size_function, curvature, layers)
     floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
     floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
     whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
@@ -301,11 +312,21 @@ def mesh(
              f"the finest the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer"
              for region in field.regions if region.size < h]
     band, stage_seconds = h, {"load": loaded}  # stage times add up over the attempts
+    if field.curvature is not None or field.layers is not None:
+        t_asks = time.perf_counter()
+        asks = _feature_asks(surface, field, floor)
+        stage_seconds["sizing"] = time.perf_counter() - t_asks
+        if progress:
+            progress("sizing")
+    else:
+        asks = no_asks()
     memory_bound, tried = False, []  # tried: whole-band sizes below h that a pass lost at
     while True:
         report = _pass_report(surface, field, band, stage_seconds)
-        attempt = _at_boundary_size(field, band)
-        result, lost, advice, walls = _mesh_at(surface, attempt, report, progress)
+        result, lost, advice, walls, report, note = _whole_pass(surface, field, band, asks, budget, report, progress,
+                                                                stage_seconds)
+        if note:
+            notes.append(note)
         if thin_features and lost and band == h and walls is not None:
             # The whole band at h / 2, h / 4, ... as memory allows, for _thin_locally to try
             # where one is estimated at fewer tets than its next round; h / 2 only where
@@ -318,7 +339,7 @@ def mesh(
             if _missed(report) or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
                 wholes = [s for s in wholes if s != h / 2]
             local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes, progress,
-                                                           stage_seconds)
+                                                           stage_seconds, asks)
             if local is not None:
                 local.report.notes = [*notes, *local.report.notes]
                 return local
@@ -344,11 +365,7 @@ def mesh(
         band = finer
     report.notes = notes
     if lost:
-        if report.n_tets == 0:
-            raise ParoctError(f"no tets: the solid is thinner than size = {band:.4g} everywhere; {advice}")
-        if report.volume_error < -LOST_TOO_MUCH:
-            raise ParoctError(f"the mesh at boundary size {band:.4g} keeps only {100 * (1 + report.volume_error):.2g}% "
-                              f"of the solid's volume; {advice}")
+        _refuse_losing_too_much(report, band, advice)
         floor_text = ""
         if thin_features and band <= floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached; "
@@ -358,6 +375,79 @@ def mesh(
             floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
         report.warnings.append(f"{floor_text}{lost}; {advice}")
     return result
+
+
+def _feature_asks(surface: Surface, field: SizeField, floor: float) -> FeatureAsks:
+    """Where the size field's curvature and layers (lfs.py) ask for a boundary finer than
+    field.size, down to floor: none unless they are given."""
+    asks = no_asks()
+    max_depth = _local_depth(field.size, floor)
+    if max_depth < 1 or (field.curvature is None and field.layers is None):
+        return asks
+    coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
+    if field.curvature is not None:
+        asks = curvature_asks(surface, coarse, field.curvature, max_depth, DEFAULT_FEATURE_ANGLE)
+    if field.layers is not None:
+        snapped = rays.snap_surface(coarse, surface.vertices)
+        faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+        crossings = {d: rays.row_crossings(coarse, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
+        walls = find_thin_features(coarse, crossings, surface.vertices, faces).facing_below(THIN_FACING)
+        asks = merged_asks(asks, wall_asks(walls, field.size, field.layers, max_depth))
+    return asks
+
+
+def _whole_pass(surface: Surface, field: SizeField, band: float, asks: FeatureAsks, budget: float,
+                report: MeshReport, progress: Callable[[str], None] | None,
+                stage_seconds: dict) -> tuple[MeshResult, str, str, ThinFeatures | None, MeshReport, str]:
+    """One pass with the whole band at size band (field.size / 2**k), refined further where
+    asks (depths below field.size) ask for finer than band: _mesh_at, or with asks
+    _mesh_with_asks.  Returns _mesh_at's (result, lost, advice, walls), the pass's report
+    (``report`` unless asks made their own) and a note ('' if none)."""
+    finer = asks.deeper_than(int(round(np.log2(field.size / band))))
+    attempt = _at_boundary_size(field, band)
+    note = ""
+    if not finer.empty:
+        sized = _mesh_with_asks(surface, attempt, finer, budget, progress, stage_seconds)
+        if isinstance(sized, tuple):
+            return sized
+        note = f"the boundary was not refined where {finer.why}: {sized}"
+    return *_mesh_at(surface, attempt, report, progress), report, note
+
+
+def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budget: float,
+                    progress: Callable[[str], None] | None,
+                    stage_seconds: dict) -> tuple[MeshResult, str, str, ThinFeatures | None, MeshReport, str] | str:
+    """The pass with the band refined where asks say (measure-and-refine rounds:
+    _refine_rounds): _whole_pass's tuple, or why the band could not be refined so."""
+    coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
+    deepest = int(asks.depth.max())
+    frame = _refined_frame(coarse, deepest)
+    if frame.levels > MAX_FRAME_LEVELS:
+        return f"a frame of {frame.levels} levels is too deep"
+    wanted = band_levels(frame, coarse.levels, coarse.to_lattice(asks.points) * 2.0**deepest, coarse.levels + asks.depth,
+                         ring=0)
+    framed = FramedSurface.build(surface, frame, coarse.levels)
+    result, report, rounds, why = _refine_rounds(surface, field, framed, wanted, budget, progress, stage_seconds)
+    if result is None:
+        return why
+    note = f"boundary refined to {frame.h:.4g} where {asks.why}, in {rounds} measure-and-refine round{'s' * (rounds > 1)}"
+    lost = _losses(report, surface)
+    advice, walls = "", None
+    if lost:
+        snapped = rays.snap_surface(coarse, surface.vertices)
+        crossings = {X_AXIS_DIRECTION: rays.row_crossings(coarse, snapped, framed.faces, X_AXIS_DIRECTION)}
+        advice, walls = _walls_of_loss(surface, coarse, snapped, framed.faces, crossings, report)
+    return result, lost, advice, walls, report, note
+
+
+def _refuse_losing_too_much(report: MeshReport, band: float, advice: str) -> None:
+    """ParoctError if the mesh at boundary size band has no tets, or keeps less than half the
+    solid (LOST_TOO_MUCH): what is left is not the part."""
+    if report.n_tets == 0:
+        raise ParoctError(f"no tets: the solid is thinner than size = {band:.4g} everywhere; {advice}")
+    if report.volume_error < -LOST_TOO_MUCH:
+        raise ParoctError(f"the mesh at boundary size {band:.4g} keeps only {100 * (1 + report.volume_error):.2g}% "
+                          f"of the solid's volume; {advice}")
 
 
 def _pass_report(surface: Surface, field: SizeField, band: float, stage_seconds: dict) -> MeshReport:
@@ -375,11 +465,13 @@ def _local_depth(size: float, floor: float) -> int:
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
                   wholes: Sequence[float], progress: Callable[[str], None] | None,
-                  stage_seconds: dict) -> tuple[MeshResult | None, str, list[float], list[str]]:
+                  stage_seconds: dict, base: FeatureAsks) -> tuple[MeshResult | None, str, list[float], list[str]]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
     one level more while the mesh still loses topology or volume.
 
+    base: asks of the size field's own (curvature, layers: lfs.py; depths below field.size)
+    that every round and whole-band pass keeps.
     wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
     Before a round, the coarsest not yet tried is meshed over the whole band when
     estimate_tets puts it below the round's _local_tets (before the first round, only
@@ -403,7 +495,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     cap, extra = min(max_depth, WHOLE_BAND_DEPTH), 0
     needs = _thin_asks(coarse, walls, max_depth, 0)[1]  # the levels each sample's two layers need
     for step in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
-        frame, depth, wanted = _local_ask(coarse, walls, cap, extra)
+        frame, depth, wanted = _local_ask(coarse, walls, cap, extra, base)
         if depth.size == 0:
             return None, "", tried, tried_notes
         if frame.levels > MAX_FRAME_LEVELS:
@@ -416,9 +508,10 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                 why = (f"the whole band at size / {field.size / size:g} is estimated at {whole} tets, fewer than the "
                        f"{local} of a round near them")
                 report = _pass_report(surface, field, size, stage_seconds)
-                kept, still, _, _ = _mesh_at(surface, _at_boundary_size(field, size), report, progress)
+                kept, still, _, _, report, note = _whole_pass(surface, field, size, base, budget, report, progress,
+                                                              stage_seconds)
                 if not still:
-                    report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}"]
+                    report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}", *([note] if note else [])]
                     return kept, "", tried, []
                 tried.append(size)
                 note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
@@ -434,32 +527,9 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             cap, extra = deeper
             continue
         tried_band = wanted
-        fewest, stalled, window = np.iinfo(np.int64).max, 0, None
-        for rounds in range(1, MAX_REFINE_ROUNDS + 1):
-            if local * BYTES_PER_TET > budget:
-                return None, LOCAL_MEMORY, tried, tried_notes
-            report = _pass_report(surface, field, frame.h, stage_seconds)
-            result, asks = _mesh_locally(surface, field, framed, wanted, report, progress, window)
-            if result is not None:
-                break
-            if window is None:
-                fewest, stalled = (report.bad_tets, 0) if report.bad_tets < fewest else (fewest, stalled + 1)
-            elif asks.keys.size == 0:  # the refined cells are clean: check everything
-                window = None
-                continue
-            merged = merge_band_levels(wanted, asks)
-            if stalled == STALLED_ROUNDS or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
-                break
-            # Only the cells near the new asks change: check those alone until they are clean.
-            changed = merged.keys[wanted.level_of(merged.keys) != merged.levels]
-            anchors = octant_lattice_anchors(changed, frame)
-            window = tuple(band_levels(frame, coarse.levels, anchors, np.full(changed.shape[0], coarse.levels), ring).keys
-                           for ring in (WINDOW_RING, WINDOW_RING - 2))
-            wanted = merged
-            local = _local_tets(surface, field, wanted)
+        result, report, rounds, why = _refine_rounds(surface, field, framed, wanted, budget, progress, stage_seconds)
         if result is None:
-            return None, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
-                          f"degrees after {rounds} measure-and-refine rounds"), tried, tried_notes
+            return None, why, tried, tried_notes
         known = walls.thickness[walls.thickness < 2 * coarse.h] > 0  # as _thin_asks picks its samples
         beyond = int(np.max(depth - needs, initial=0, where=known))
         layers = f", {beyond} level{'s' * (beyond > 1)} finer than two layers need" if beyond > 0 else ""
@@ -484,6 +554,43 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         lost_at_floor = still if cap == max_depth else None
         cap, extra = deeper
     return None, f"min_size = {floor:.4g} reached near the thin places and the mesh still lost", tried, tried_notes
+
+
+def _refine_rounds(surface: Surface, field: SizeField, framed: FramedSurface, wanted: BandLevels, budget: float,
+                   progress: Callable[[str], None] | None,
+                   stage_seconds: dict) -> tuple[MeshResult | None, MeshReport | None, int, str]:
+    """Mesh with the band refined where ``wanted`` asks (framed: the surface in the finest
+    frame) and refine it further around every tet outside DIHEDRAL_BOUND that other warps do
+    not mend, up to MAX_REFINE_ROUNDS rounds, or until STALLED_ROUNDS rounds in a row find
+    no fewer such tets.  Returns (result, its report, rounds, '') or (None, the last report or
+    None, rounds, why not)."""
+    frame, coarse_level = framed.frame, framed.coarse_level
+    local = _local_tets(surface, field, wanted)
+    fewest, stalled, window, result, report = np.iinfo(np.int64).max, 0, None, None, None
+    for rounds in range(1, MAX_REFINE_ROUNDS + 1):
+        if local * BYTES_PER_TET > budget:
+            return None, report, rounds, LOCAL_MEMORY
+        report = _pass_report(surface, field, frame.h, stage_seconds)
+        result, asks = _mesh_locally(surface, field, framed, wanted, report, progress, window)
+        if result is not None:
+            return result, report, rounds, ""
+        if window is None:
+            fewest, stalled = (report.bad_tets, 0) if report.bad_tets < fewest else (fewest, stalled + 1)
+        elif asks.keys.size == 0:  # the refined cells are clean: check everything
+            window = None
+            continue
+        merged = merge_band_levels(wanted, asks)
+        if stalled == STALLED_ROUNDS or (np.array_equal(merged.keys, wanted.keys) and np.array_equal(merged.levels, wanted.levels)):
+            break
+        # Only the cells near the new asks change: check those alone until they are clean.
+        changed = merged.keys[wanted.level_of(merged.keys) != merged.levels]
+        anchors = octant_lattice_anchors(changed, frame)
+        window = tuple(band_levels(frame, coarse_level, anchors, np.full(changed.shape[0], coarse_level), ring).keys
+                       for ring in (WINDOW_RING, WINDOW_RING - 2))
+        wanted = merged
+        local = _local_tets(surface, field, wanted)
+    return None, report, rounds, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
+                                  f"degrees after {rounds} measure-and-refine rounds")
 
 
 def _same_band(framed: FramedSurface, a: BandLevels, b: BandLevels) -> bool:
@@ -576,7 +683,8 @@ def _bytes_text(n: float) -> str:
 
 def _at_boundary_size(field: SizeField, band: float) -> SizeField:
     """The requested size field with a (smaller) boundary size; a uniform request stays uniform."""
-    return size_field(band, band if field.max_size == field.size else field.max_size, field.regions, field.function)
+    return size_field(band, band if field.max_size == field.size else field.max_size, field.regions, field.function,
+                      field.curvature, field.layers)
 
 
 def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
@@ -656,23 +764,33 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     lost = _losses(report, surface)
     advice, walls = "", None
     if lost:
-        for d in range(EDGE_DIRECTIONS.shape[0]):
-            if d not in crossings:
-                crossings[d] = rays.row_crossings(frame, snapped, faces, d)
-        features = find_thin_features(frame, crossings, surface.vertices, faces)
-        advice = _thin_feature_advice(features, h, surface)
-        walls = features.facing_below(THIN_FACING)
-        if _missed(report):
-            near = np.zeros(faces.shape[0], dtype=bool)
-            near[report.missed_faces] = True
-            if report.missed_vertices.size:
-                at_missed = np.zeros(snapped.shape[0], dtype=bool)
-                at_missed[report.missed_vertices] = True
-                near |= at_missed[faces].any(axis=1)
-            _refuse_crossings(surface, np.flatnonzero(near))
-            walls = _with_missed_parts(walls, frame, snapped, faces[near])
+        advice, walls = _walls_of_loss(surface, frame, snapped, faces, crossings, report)
         stages.done("features")
     return result, lost, advice, walls
+
+
+def _walls_of_loss(surface: Surface, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, crossings: dict,
+                   report: MeshReport) -> tuple[str, ThinFeatures]:
+    """After a pass that lost something (report): the advice naming the thinnest wall and gap,
+    and the walls and gaps to refine near, measured in frame (snapped, faces: the surface in
+    it; crossings: the row crossings by direction computed so far, completed here), with the
+    parts the boundary missed.  ParoctError if the triangles near those cross others."""
+    for d in range(EDGE_DIRECTIONS.shape[0]):
+        if d not in crossings:
+            crossings[d] = rays.row_crossings(frame, snapped, faces, d)
+    features = find_thin_features(frame, crossings, surface.vertices, faces)
+    advice = _thin_feature_advice(features, frame.h, surface)
+    walls = features.facing_below(THIN_FACING)
+    if _missed(report):
+        near = np.zeros(faces.shape[0], dtype=bool)
+        near[report.missed_faces] = True
+        if report.missed_vertices.size:
+            at_missed = np.zeros(snapped.shape[0], dtype=bool)
+            at_missed[report.missed_vertices] = True
+            near |= at_missed[faces].any(axis=1)
+        _refuse_crossings(surface, np.flatnonzero(near))
+        walls = _with_missed_parts(walls, frame, snapped, faces[near])
+    return advice, walls
 
 
 def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:
@@ -839,15 +957,21 @@ def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
     return FatFrame(origin=frame.origin, h=frame.h / 2**depth, levels=frame.levels + depth)
 
 
-def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int,
-               extra: int) -> tuple[FatFrame, np.ndarray, BandLevels | None]:
-    """The finest frame, the depths (K,) of _thin_asks and the band asked for in that frame
-    (None if no wall or gap asks: K = 0, or a frame deeper than MAX_FRAME_LEVELS)."""
+def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int,
+               base: FeatureAsks) -> tuple[FatFrame, np.ndarray, BandLevels | None]:
+    """The finest frame, the depths (K,) of _thin_asks and the band asked for in that frame,
+    with base's asks too (None if no wall or gap asks: K = 0, or a frame deeper than
+    MAX_FRAME_LEVELS)."""
     points, depth = _thin_asks(coarse, walls, max_depth, extra)
-    frame = _refined_frame(coarse, int(depth.max(initial=0)))
+    all_points, all_depth = points, depth
+    if depth.size and not base.empty:
+        all_points = np.concatenate([points, coarse.to_lattice(base.points)])
+        all_depth = np.concatenate([depth, base.depth])
+    deepest = int(all_depth.max(initial=0))
+    frame = _refined_frame(coarse, deepest)
     if depth.size == 0 or frame.levels > MAX_FRAME_LEVELS:
         return frame, depth, None
-    return frame, depth, band_levels(frame, coarse.levels, points * 2.0 ** int(depth.max()), coarse.levels + depth)
+    return frame, depth, band_levels(frame, coarse.levels, all_points * 2.0**deepest, coarse.levels + all_depth)
 
 
 def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int) -> tuple[np.ndarray, np.ndarray]:

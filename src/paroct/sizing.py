@@ -79,12 +79,16 @@ def _point(name: str, value) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SizeField:
-    """What the user asked for: finest size, largest interior size, local refinements."""
+    """What the user asked for: finest size, largest interior size, local refinements, and
+    the boundary's own refinement (lfs.py): curvature, elements per full turn of the surface
+    (None: not asked), layers, elements across walls (None: not asked)."""
 
     size: float
     max_size: float
     regions: tuple = ()
     function: SizeFunction | None = None
+    curvature: float | None = None
+    layers: float | None = None
 
     @property
     def coarse_depth(self) -> int:
@@ -93,7 +97,8 @@ class SizeField:
 
 
 def size_field(size: float, max_size: float | None = None, regions: Sequence[Region] = (),
-               function: SizeFunction | None = None) -> SizeField:
+               function: SizeFunction | None = None, curvature: float | None = None,
+               layers: float | None = None) -> SizeField:
     """Checked size field.  max_size defaults to DEFAULT_MAX_SIZE_FACTOR * size and is rounded
     down to a power-of-two multiple of size."""
     if max_size is None:
@@ -117,7 +122,12 @@ def size_field(size: float, max_size: float | None = None, regions: Sequence[Reg
                 positive_number("refinement sphere radius", r.radius)
     if function is not None and not callable(function):
         raise ParoctError("size_function must be callable: (N, 3) points -> (N,) sizes")
-    return SizeField(size=float(size), max_size=float(size * 2**depth), regions=tuple(regions), function=function)
+    if curvature is not None:
+        curvature = positive_number("curvature", curvature)
+    if layers is not None:
+        layers = positive_number("layers", layers)
+    return SizeField(size=float(size), max_size=float(size * 2**depth), regions=tuple(regions), function=function,
+                     curvature=curvature, layers=layers)
 
 
 def _octant_boxes(keys: np.ndarray, level: int, frame: FatFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,418 @@
+"""Local feature size: where the boundary must be finer than size, read off the surface.
+
+Two measures, each only when the user asks for it (SizeField.curvature, SizeField.layers):
+
+- **curvature** N: boundary elements of long edge at most 2 pi r / N where the surface bends
+  with radius r (N elements per full turn, as Gmsh's Mesh.MeshSizeFromCurvature).  The
+  curvature at a surface vertex is its bending over its area (vertex_curvature): half the
+  sum of theta_e * l_e over its smooth edges (theta_e the angle between the two triangles'
+  normals, l_e the edge's length) over a third of its triangles' area.  Summed over a
+  surface, sum theta_e l_e tends to the integral of |k1| + |k2| (twice the mean curvature's
+  for a convex surface), so the estimate is exact on a cylinder (1 / r) and twice the
+  curvature on a sphere (2 / r): it errs towards smaller elements, by at most a factor 2
+  where both principal curvatures agree.  Edges sharper than the feature angle are edges of
+  the part (sharp.py, boundary.surface_patches), not curvature: they ask for nothing.
+- **layers** K: at least K element layers across every wall (material, not gap) thinner than
+  K x size: long edge at most t / K for a wall of thickness t, from the thickness samples that
+  the lattice rows measure (features.thin_features).
+
+Each gives asks: points (S, 3) in model units and depths (S,) int64, the levels below size
+each point needs (1 or more, at most max_depth).  The mesher turns them into band levels
+(band.band_levels) and refines the band there, measuring and mending the tets where it
+changes level (mesher._refine_rounds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .boundary import surface_patches
+from .features import ThinFeatures, face_normals
+from .frame import FatFrame
+from .surface import Surface
+
+
+@dataclass(frozen=True)
+class FeatureAsks:
+    """Where the boundary must be finer than size: points (S, 3) float64 in model units,
+    depth (S,) int64 levels below size (>= 1) at each, and a line saying why for the notes."""
+
+    points: np.ndarray
+    depth: np.ndarray
+    why: str
+
+    @property
+    def empty(self) -> bool:
+        return self.depth.size == 0
+
+    def deeper_than(self, levels: int) -> FeatureAsks:
+        """The asks for more than ``levels`` levels below size, as levels below size / 2**levels."""
+        if levels <= 0:
+            return self
+        keep = self.depth > levels
+        return FeatureAsks(self.points[keep], self.depth[keep] - levels, self.why)
+
+
+def no_asks() -> FeatureAsks:
+    return FeatureAsks(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), "")
+
+
+def merged_asks(a: FeatureAsks, b: FeatureAsks) -> FeatureAsks:
+    """Both sets of asks (a's first); why joins the non-empty texts."""
+    why = " and ".join(w for w in (a.why, b.why) if w)
+    return FeatureAsks(np.concatenate([a.points, b.points]), np.concatenate([a.depth, b.depth]), why)
+
+
+#: A bend measured at one scale is resolved by finer elements only if it shrinks when measured
+#: at half the scale (a fillet's bend per cell halves; a crease's, one edge of the
+#: triangulation, stays): the finer cells' bend must be below this fraction of the coarser's.
+SHRINKS = 0.75
+
+
+def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth: int,
+                   feature_angle: float) -> FeatureAsks:
+    """Asks for long edges of at most 2 pi r / per_turn where the surface bends with radius
+    r, measured at the scale of the elements each level would make (bent_cells), coarse to
+    fine.  The triangles are split into pieces of edge at most frame.h and binned by
+    centroid into the cells of frame's lattice (edge frame.h, the size): a cell's bend is its
+    curvature times the cell's edge, the turn of the surface from cell to cell, and a cell
+    bends too much for elements of its size when that exceeds 2 pi / per_turn.  The pieces in
+    and around those cells are cut to half the edge and binned into cells of half the edge: a
+    cell that bent too much asks one level finer if every finer cell of its pieces bends less
+    than SHRINKS times it, and the finer cells of those that still bend too much are measured
+    again, down to max_depth.  A bend that does not shrink is a crease of the triangulation,
+    which no element size resolves.  Each patch of the surface split at feature_angle, or at
+    360 / per_turn degrees if smaller (boundary.surface_patches), is measured apart: an edge
+    turning more than one element may is an edge of the part, not curvature."""
+    if max_depth < 1:
+        return no_asks()
+    vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    normals = face_normals(vertices, faces)
+    patches = surface_patches(surface, min(feature_angle, 360 / per_turn))
+    limit = 2 * np.pi / per_turn
+    pieces, owner = triangle_pieces(vertices[faces], frame.h)
+    centres, bend, group = _bends(frame, 0, pieces, owner, patches, normals)
+    too_bent = bend > limit
+    points, depth, smallest = [], [], np.inf
+    for d in range(max_depth):
+        if not too_bent.any():
+            break
+        # The pieces in and around the cells that bend too much, cut to the finer cells; of
+        # those, the ones in the finer cells inside them (core) and the ring around, for the fits.
+        bent = np.floor(frame.to_lattice(centres[too_bent]) * 2**d).astype(np.int64)
+        near = _near_cells(np.floor(frame.to_lattice(centres) * 2**d).astype(np.int64)[group], bent)
+        level_pieces = pieces
+        pieces, child_of = triangle_pieces(pieces[near], frame.h / 2 ** (d + 1))
+        finer_cells = np.floor(frame.to_lattice(pieces.mean(axis=1)) * 2 ** (d + 1)).astype(np.int64)
+        core = _near_cells(finer_cells // 2, bent, ring=False)
+        keep = _near_cells(finer_cells, finer_cells[core])
+        pieces, child_of, core = pieces[keep], child_of[keep], core[keep]
+        parent, owner = group[near][child_of], owner[near][child_of]
+        finer_centres, finer_bend, finer_group = _bends(frame, d + 1, pieces, owner, patches, normals, core)
+        # A cell is asked finer if the worst of its pieces' finer cells bends less than it:
+        # a fillet's bend halves; a crease's stays, and noise rarely halves everywhere.
+        worst_child = np.zeros(bend.shape[0])
+        np.maximum.at(worst_child, parent, finer_bend[finer_group])
+        asked = too_bent & (worst_child < SHRINKS * bend)
+        if asked.any():
+            finite = asked & np.isfinite(bend)
+            if finite.any():
+                smallest = min(smallest, frame.h / 2**d / bend[finite].max())
+            cells = cells_met(frame, level_pieces[asked[group]])
+            points.append(frame.to_space(cells + 0.5))
+            depth.append(np.full(cells.shape[0], d + 1, dtype=np.int64))
+        from_asked = np.zeros(finer_bend.shape[0], dtype=bool)
+        from_asked[finer_group[asked[parent]]] = True
+        centres, bend, group, too_bent = finer_centres, finer_bend, finer_group, (finer_bend > limit) & from_asked
+    if not points:
+        return no_asks()
+    depth = np.concatenate(depth)
+    return FeatureAsks(np.concatenate(points), depth,
+                       f"the surface curves more than {per_turn:g} elements per turn allow ("
+                       + (f"smallest radius about {smallest:.4g}, " if np.isfinite(smallest) else "")
+                       + f"up to {int(depth.max())} level{'s' * int(depth.max() > 1)} finer)")
+
+
+def _bends(frame: FatFrame, depth: int, pieces: np.ndarray, owner: np.ndarray, patches: np.ndarray,
+           normals: np.ndarray, measure: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """bent_cells of the pieces (S, 3, 3) of triangles owner (S,) in the cells of frame's
+    lattice ``depth`` levels finer, the curvature times the cells' edge: (centres, bend,
+    group of each piece); measure (S,): as in bent_cells."""
+    centroids = pieces.mean(axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0]), axis=1)
+    cells = np.floor(frame.to_lattice(centroids) * 2**depth).astype(np.int64)
+    centres, curvature, group = bent_cells(cells, patches[owner], centroids, normals[owner], area, measure)
+    return centres, curvature * (frame.h / 2**depth), group
+
+
+def cells_met(frame: FatFrame, pieces: np.ndarray) -> np.ndarray:
+    """The distinct cells (C, 3) int64 of frame's lattice that the bounding boxes (in lattice
+    coordinates) of the triangles pieces (P, 3, 3) meet: every cell a piece meets, and a few
+    beside it."""
+    corners = frame.to_lattice(pieces.reshape(-1, 3)).reshape(-1, 3, 3)
+    lo = np.floor(corners.min(axis=1)).astype(np.int64)
+    hi = np.floor(corners.max(axis=1)).astype(np.int64)
+    reach = int((hi - lo).max(initial=0))
+    steps = np.arange(reach + 1)
+    offsets = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+    cells = (lo[:, None, :] + offsets[None])[np.all(lo[:, None, :] + offsets[None] <= hi[:, None, :], axis=2)]
+    first = cells.min(axis=0)
+    span = cells.max(axis=0) - first + 1
+    keys = np.unique(_linear(cells, first, span))
+    return np.stack([keys // (span[1] * span[2]), keys // span[2] % span[1], keys % span[2]], axis=1) + first
+
+
+_AROUND = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)], dtype=np.int64)
+
+
+def _near_cells(cells: np.ndarray, marked: np.ndarray, ring: bool = True) -> np.ndarray:
+    """Mask (S,) of the cells (S, 3) among the marked cells (B, 3, repeats allowed), or next
+    to one (26 around) with ring."""
+    lo = np.minimum(cells.min(axis=0), marked.min(axis=0)) - 1
+    span = np.maximum(cells.max(axis=0), marked.max(axis=0)) - lo + 2
+    around = (marked[:, None, :] + _AROUND[None]).reshape(-1, 3) if ring else marked
+    table = np.unique(_linear(around, lo, span))
+    keys = _linear(cells, lo, span)
+    at = np.minimum(np.searchsorted(table, keys), table.size - 1)
+    return table[at] == keys
+
+
+def _linear(cells: np.ndarray, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """One int64 (N,) per cell (N, 3) of the box from lo spanning span cells an axis."""
+    return ((cells[:, 0] - lo[0]) * span[1] + (cells[:, 1] - lo[1])) * span[2] + (cells[:, 2] - lo[2])
+
+
+def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles (S, 3, 3) cut into pieces with no edge longer than spacing: the pieces'
+    corners (P, 3, 3) float64 and the triangle (P,) each came from, in order of triangle.
+    A triangle with a longer edge is cut into k = ceil(longest / spacing) strips by the lines
+    parallel to its shortest edge through the points that split the other two edges in k
+    equal parts, each strip a triangle and the rest two (2 k - 1 pieces), and the pieces cut
+    the same way until none is too long.  A sliver of length L gives about 2 L / spacing
+    pieces (a split into similar triangles gives (L / spacing)**2, longest-edge bisection
+    about (L / spacing)**1.6)."""
+    pieces = np.ascontiguousarray(corners, dtype=np.float64).reshape(-1, 3, 3)
+    parent = np.arange(pieces.shape[0])
+    done_pieces, done_parent = [], []
+    while pieces.shape[0]:
+        longest = np.max(np.sum((pieces - np.roll(pieces, 1, axis=1)) ** 2, axis=2), axis=1)
+        small = longest <= spacing * spacing
+        done_pieces.append(pieces[small])
+        done_parent.append(parent[small])
+        pieces, parent = pieces[~small], parent[~small]
+        if pieces.shape[0]:
+            counts = _strip_counts(pieces, float(spacing))
+            child_of = np.repeat(np.arange(pieces.shape[0]), counts)
+            pieces, parent = _strips(pieces, float(spacing), counts), parent[child_of]
+    pieces, parent = np.concatenate(done_pieces), np.concatenate(done_parent)
+    order = np.argsort(parent, kind="stable")
+    return pieces[order], parent[order]
+
+
+@nb.njit(cache=True)
+def _strip_plan(tri, spacing):
+    """(a, k): the corner opposite tri's shortest edge and the number of strips."""
+    shortest, a, longest = np.inf, 0, 0.0
+    for j in range(3):
+        d = 0.0
+        for m in range(3):
+            d += (tri[(j + 2) % 3, m] - tri[(j + 1) % 3, m]) ** 2  # the edge opposite corner j
+        if d < shortest:
+            shortest, a = d, j
+        longest = max(longest, d)
+    return a, max(1, int(np.ceil(np.sqrt(longest) / spacing)))
+
+
+@nb.njit(cache=True)
+def _strip_counts(pieces, spacing):
+    counts = np.empty(pieces.shape[0], dtype=np.int64)
+    for t in range(pieces.shape[0]):
+        counts[t] = 2 * _strip_plan(pieces[t], spacing)[1] - 1
+    return counts
+
+
+@nb.njit(cache=True)
+def _strips(pieces, spacing, counts):
+    out = np.empty((counts.sum(), 3, 3))
+    n = 0
+    for t in range(pieces.shape[0]):
+        a, k = _strip_plan(pieces[t], spacing)
+        pa, pb, pc = pieces[t, a], pieces[t, (a + 1) % 3], pieces[t, (a + 2) % 3]
+        for i in range(k):
+            f0, f1 = i / k, (i + 1) / k
+            # p_i on a-b, q_i on a-c: the triangle (p_i, p_i+1, q_i+1), then (p_i, q_i+1, q_i) but at the tip
+            for m in range(3):
+                out[n, 0, m] = pa[m] + f0 * (pb[m] - pa[m])
+                out[n, 1, m] = pa[m] + f1 * (pb[m] - pa[m])
+                out[n, 2, m] = pa[m] + f1 * (pc[m] - pa[m])
+            n += 1
+            if i > 0:
+                for m in range(3):
+                    out[n, 0, m] = pa[m] + f0 * (pb[m] - pa[m])
+                    out[n, 1, m] = pa[m] + f1 * (pc[m] - pa[m])
+                    out[n, 2, m] = pa[m] + f0 * (pc[m] - pa[m])
+                n += 1
+    return out
+
+
+def bent_cells(cells: np.ndarray, patch: np.ndarray, points: np.ndarray, normals: np.ndarray,
+               weight: np.ndarray, measure: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The surface's curvature at the scale of a lattice cell.  Samples (S,) of the surface:
+    their cells (S, 3) int64 lattice cells (one scale), patch ids (S,), points (S, 3), unit
+    normals (S, 3) and areas (S,).  The samples of one patch in one cell form a group, with
+    the area-weighted mean point and unit mean normal.  Around each group, the groups of its
+    patch in its own and the 26 cells around are fitted, weighted by area, with a linear
+    normal field n(x) = n0 + J (x - x0) in the plane of their points (least squares, the
+    points' direction of least spread left out); the group's curvature is J's largest singular
+    value, the largest principal curvature (1 / r on a sphere or across a cylinder of radius
+    r; noise finer than a cell averages out).  A group whose normals cancel (their
+    area-weighted sum shorter than half their area: the surface folds back within the cell)
+    gets infinite curvature and is left out of the others' fits.  Returns (mean points (G,
+    3), curvature (G,) in 1 / model units, the group (S,) of each sample).  measure (S,) bool:
+    fit only the groups holding a sample marked (the others' curvature is 0, unmeasured: they
+    serve as neighbours); None: all."""
+    lo = cells.min(axis=0, initial=0) - 1
+    span = cells.max(axis=0, initial=0) - lo + 2
+    linear = ((cells[:, 0] - lo[0]) * span[1] + (cells[:, 1] - lo[1])) * span[2] + (cells[:, 2] - lo[2])
+    order = np.lexsort((linear, patch))
+    key_patch, key_cell = patch[order], linear[order]
+    first = np.flatnonzero(np.r_[True, (key_patch[1:] != key_patch[:-1]) | (key_cell[1:] != key_cell[:-1])])
+    group = np.empty(cells.shape[0], dtype=np.int64)
+    group[order] = np.repeat(np.arange(first.size), np.diff(np.r_[first, order.size]))
+    area = np.add.reduceat(weight[order], first)
+    mean_point = np.add.reduceat(points[order] * weight[order, None], first) / area[:, None]
+    normal_sum = np.add.reduceat(normals[order] * weight[order, None], first)
+    length = np.linalg.norm(normal_sum, axis=1)
+    folded = length < 0.5 * area
+    unit = normal_sum / np.where(length > 0, length, 1.0)[:, None]
+    fitted = np.ones(first.size, dtype=bool)
+    if measure is not None:
+        fitted = np.logical_or.reduceat(measure[order], first)
+    curvature = _fitted_curvature(key_patch[first], key_cell[first], np.ascontiguousarray(span), mean_point, unit, area,
+                                  folded, fitted)
+    return mean_point, curvature, group
+
+
+@nb.njit(cache=True)
+def _fitted_curvature(group_patch, group_cell, span, mean_point, unit, area, folded, fitted):
+    """bent_cells' fit, group by group: the area-weighted means and second moments of the
+    unfolded groups of the same patch in the 27 cells around (_find), the points' spread C
+    and the normals' turn B, J = B C+ over C's two largest eigenvalues (those above 0.05 x
+    the largest: a row of cells fits one direction), and J's largest singular value."""
+    ng = group_patch.shape[0]
+    out = np.empty(ng)
+    around = np.empty(27, dtype=np.int64)
+    spread, turn, inverse = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    field, square = np.empty((3, 3)), np.empty((3, 3))
+    p0, n0 = np.empty(3), np.empty(3)
+    for g in range(ng):
+        if not fitted[g]:
+            out[g] = 0.0
+            continue
+        if folded[g]:
+            out[g] = np.inf
+            continue
+        k, total = 0, 0.0
+        p0[:] = 0.0
+        n0[:] = 0.0
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dz in range(-1, 2):
+                    other = _find(group_patch, group_cell, group_patch[g],
+                                  group_cell[g] + (dx * span[1] + dy) * span[2] + dz)
+                    if other >= 0 and not folded[other]:
+                        around[k] = other
+                        k += 1
+                        total += area[other]
+                        for i in range(3):
+                            p0[i] += area[other] * mean_point[other, i]
+                            n0[i] += area[other] * unit[other, i]
+        p0 /= total
+        n0 /= total
+        spread[:] = 0.0
+        turn[:] = 0.0
+        for a in range(k):
+            o = around[a]
+            w = area[o] / total
+            for i in range(3):
+                for j in range(3):
+                    spread[i, j] += w * (mean_point[o, i] - p0[i]) * (mean_point[o, j] - p0[j])
+                    turn[i, j] += w * (unit[o, i] - n0[i]) * (mean_point[o, j] - p0[j])
+        lam, vec = _symmetric_eigen(spread)
+        inverse[:] = 0.0
+        for e in range(1, 3):  # lam ascending: lam[0] is the direction across the surface
+            if lam[e] > 0.05 * lam[2]:
+                for i in range(3):
+                    for j in range(3):
+                        inverse[i, j] += vec[i, e] * vec[j, e] / lam[e]
+        for i in range(3):
+            for j in range(3):
+                field[i, j] = turn[i, 0] * inverse[0, j] + turn[i, 1] * inverse[1, j] + turn[i, 2] * inverse[2, j]
+        for i in range(3):
+            for j in range(3):
+                square[i, j] = field[0, i] * field[0, j] + field[1, i] * field[1, j] + field[2, i] * field[2, j]
+        out[g] = np.sqrt(max(_symmetric_eigen(square)[0][2], 0.0))
+    return out
+
+
+@nb.njit(cache=True)
+def _symmetric_eigen(m):
+    """Eigenvalues (3,) ascending and eigenvectors (columns of (3, 3)) of a symmetric 3 x 3
+    matrix, by cyclic Jacobi rotations."""
+    a = m.copy()
+    v = np.eye(3)
+    for _ in range(50):
+        off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
+        if off <= 1e-30 * (a[0, 0] ** 2 + a[1, 1] ** 2 + a[2, 2] ** 2) or off == 0.0:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            if a[p, q] == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2 * a[p, q])
+            t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1))
+            c = 1 / np.sqrt(t * t + 1)
+            s = t * c
+            for r in range(3):  # a <- a J, then J^T a
+                arp, arq = a[r, p], a[r, q]
+                a[r, p], a[r, q] = c * arp - s * arq, s * arp + c * arq
+            for r in range(3):
+                apr, aqr = a[p, r], a[q, r]
+                a[p, r], a[q, r] = c * apr - s * aqr, s * apr + c * aqr
+            for r in range(3):
+                vrp, vrq = v[r, p], v[r, q]
+                v[r, p], v[r, q] = c * vrp - s * vrq, s * vrp + c * vrq
+    lam = np.array([a[0, 0], a[1, 1], a[2, 2]])
+    order = np.argsort(lam)
+    return lam[order], v[:, order]
+
+
+@nb.njit(cache=True)
+def _find(group_patch, group_cell, patch, cell):
+    """Index of (patch, cell) in the lexicographically sorted pairs, or -1."""
+    lo, hi = 0, group_patch.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if group_patch[mid] < patch or (group_patch[mid] == patch and group_cell[mid] < cell):
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < group_patch.shape[0] and group_patch[lo] == patch and group_cell[lo] == cell:
+        return lo
+    return -1
+
+
+def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -> FeatureAsks:
+    """Asks for layers elements across each wall sample (is_wall, thickness t > 0) thinner than
+    layers * size: depth ceil(log2(layers * size / t)), clipped to [1, max_depth]."""
+    thin = np.flatnonzero(walls.is_wall & (walls.thickness > 0) & (walls.thickness < layers * size))
+    if max_depth < 1 or thin.size == 0:
+        return no_asks()
+    t = walls.thickness[thin]
+    depth = np.clip(np.ceil(np.log2(layers * size / t) - 1e-9), 1, max_depth).astype(np.int64)
+    return FeatureAsks(walls.points[thin], depth,
+                       f"{thin.size} samples of walls thinner than {layers:g} x size = {layers * size:.4g} "
+                       f"(thinnest {t.min():.4g})")

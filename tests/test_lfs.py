@@ -1,0 +1,217 @@
+"""Sizing from the surface itself: curvature (elements per turn) and layers across walls."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import manifold3d
+import numpy as np
+import pytest
+
+import paroct
+from paroct.boundary import surface_patches
+from paroct.cli import main
+from paroct.errors import ParoctError
+from paroct.features import face_normals
+from paroct.frame import fat_frame
+from paroct.lfs import bent_cells, cells_met, curvature_asks, triangle_pieces
+from paroct.stuffing import DIHEDRAL_BOUND
+from paroct.surface import load_surface
+
+from . import naive
+
+DATA = Path(__file__).resolve().parent.parent / "data"
+
+
+def _area(tris: np.ndarray) -> np.ndarray:
+    return 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_triangle_pieces_match_recursive_bisection(seed):
+    """Random triangles, slivers and a degenerate one: the same pieces as the recursive
+    reference, in order of triangle; no edge over spacing; areas add up."""
+    rng = np.random.default_rng(seed)
+    tris = rng.uniform(-3, 3, (12, 3, 3))
+    tris[0] = [[0, 0, 0], [10, 0, 0], [10, 0.01, 0]]  # a sliver
+    tris[1] = [[1, 1, 1], [1, 1, 1], [4, 2, 1]]  # two corners alike
+    spacing = 0.7
+    pieces, owner = triangle_pieces(tris, spacing)
+    want, want_owner = naive.triangle_pieces(tris, spacing)
+    assert owner.tolist() == want_owner
+    for t in range(tris.shape[0]):
+        got = sorted(map(tuple, np.round(pieces[owner == t].reshape(-1, 9), 12)))
+        ref = sorted(map(tuple, np.round(np.array([p for p, o in zip(want, want_owner) if o == t]).reshape(-1, 9), 12)))
+        assert got == ref
+    edges = np.linalg.norm(pieces - np.roll(pieces, 1, axis=1), axis=2)
+    assert edges.max() <= spacing
+    np.testing.assert_allclose(np.bincount(owner, _area(pieces)), _area(tris), rtol=1e-12, atol=1e-12)
+
+
+def test_a_sliver_is_cut_along_its_length_only():
+    """A 100 x 0.01 sliver at spacing 1: pieces in proportion to its length, not its square."""
+    pieces, _ = triangle_pieces(np.array([[[0, 0, 0], [100, 0, 0], [100, 0.01, 0]]]), 1.0)
+    assert 100 <= pieces.shape[0] <= 256
+
+
+def _paraboloid_samples(a: float, b: float, step: float):
+    """Points of z = a x^2 + b y^2 on a grid, their unit normals and equal areas."""
+    x, y = np.meshgrid(np.arange(-2, 2, step), np.arange(-2, 2, step), indexing="ij")
+    points = np.stack([x.ravel(), y.ravel(), a * x.ravel() ** 2 + b * y.ravel() ** 2], axis=1)
+    normals = np.stack([-2 * a * points[:, 0], -2 * b * points[:, 1], np.ones(len(points))], axis=1)
+    return points, normals / np.linalg.norm(normals, axis=1)[:, None], np.full(len(points), step * step)
+
+
+def test_bent_cells_fit_matches_the_normal_equations():
+    """Each group's curvature is the largest singular value of the least-squares normal field
+    over its own and the 26 cells around: compared with the spelled-out fit on a paraboloid."""
+    points, normals, area = _paraboloid_samples(0.3, -0.1, 0.05)
+    cells = np.floor(points / 0.5).astype(np.int64)
+    patch = np.zeros(len(points), dtype=np.int64)
+    centres, curvature, group = bent_cells(cells, patch, points, normals, area)
+    means = {}
+    for g in range(centres.shape[0]):
+        mine = group == g
+        total = normals[mine].T @ area[mine]
+        means[tuple(cells[mine][0])] = (centres[g], total / np.linalg.norm(total), area[mine].sum())
+    checked = 0
+    for g in range(centres.shape[0]):
+        cell = tuple(cells[group == g][0])
+        around = [means[c] for c in (tuple(np.add(cell, (dx, dy, dz))) for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+                                     for dz in (-1, 0, 1)) if c in means]
+        if len(around) < 9:  # the grid's rim: too few cells for both tangent directions
+            continue
+        want = naive.largest_principal_curvature(np.array([m[0] for m in around]), np.array([m[1] for m in around]),
+                                                 np.array([m[2] for m in around]))
+        assert curvature[g] == pytest.approx(want, rel=1e-9)
+        checked += 1
+    assert checked > 20
+
+
+@pytest.mark.parametrize("shape, radius", [("sphere", 2.0), ("cylinder", 1.5)])
+def test_bent_cells_measure_the_radius(shape, radius):
+    """1 / r on a sphere and across a cylinder's side (within 2 %, a chord's error), zero on
+    flat faces, at a cell edge of a fifth of the radius."""
+    solid = (manifold3d.Manifold.sphere(radius, 128) if shape == "sphere"
+             else manifold3d.Manifold.cylinder(4.0, radius, radius, 96))
+    surface = load_surface(solid)
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, radius / 5)
+    pieces, owner = triangle_pieces(surface.vertices[surface.faces], frame.h)
+    centroids = pieces.mean(axis=1)
+    cells = np.floor(frame.to_lattice(centroids)).astype(np.int64)
+    normals = face_normals(surface.vertices, surface.faces)[owner]
+    centres, curvature, group = bent_cells(cells, surface_patches(surface, 40)[owner], centroids, normals, _area(pieces))
+    flat = np.abs(normals[:, 2]) > 0.999  # the cylinder's caps
+    side = np.bincount(group, ~flat, minlength=centres.shape[0]) == np.bincount(group, minlength=centres.shape[0])
+    if shape == "cylinder":
+        assert np.all(curvature[~side] < 1e-9)
+        away = side & (centres[:, 2] > radius / 2) & (centres[:, 2] < 4.0 - radius / 2)  # fits not reaching the rims
+        side = away
+    assert np.median(curvature[side]) == pytest.approx(1 / radius, rel=0.02)
+    assert np.all(np.abs(curvature[side] * radius - 1) < 0.05)
+
+
+@pytest.mark.parametrize("per_turn", [12, 18, 36, 72])
+def test_a_sphere_asks_the_levels_its_radius_needs(per_turn):
+    """Radius 2 at size 1: elements of 2 pi r / N ask ceil(log2(N / (4 pi))) levels (none at
+    N = 12; the others half a level from the next, beyond the facets' error), everywhere on
+    the sphere alike."""
+    surface = load_surface(manifold3d.Manifold.sphere(2.0, 128))
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, 1.0)
+    asks = curvature_asks(surface, frame, per_turn, 4, 40.0)
+    need = math.ceil(math.log2(per_turn / (4 * math.pi)))
+    if need <= 0:
+        assert asks.empty
+        return
+    assert int(asks.depth.max()) == need
+    deepest = np.unique(np.floor(frame.to_lattice(asks.points[asks.depth == need])).astype(np.int64), axis=0)
+    met = cells_met(frame, triangle_pieces(surface.vertices[surface.faces], 0.25)[0])
+    assert deepest.shape[0] == met.shape[0]  # every cell the sphere meets
+
+
+def _ridge(angle: float) -> manifold3d.Manifold:
+    """A 10 x 10 prism whose top turns by ``angle`` degrees along a ridge (a crease)."""
+    rise = 5 * math.tan(math.radians(angle / 2))
+    section = manifold3d.CrossSection([[(0, 0), (10, 0), (10, 3), (5, 3 + rise), (0, 3)]])
+    return manifold3d.Manifold.extrude(section, 10.0)
+
+
+@pytest.mark.parametrize("per_turn", [8, 12])
+def test_a_crease_asks_nothing(per_turn):
+    """A ridge turning 35 degrees, under the feature angle: no element size resolves a crease,
+    so nothing is asked (at N = 8 it is measured, 35 < 45 per element, and does not shrink;
+    at 12 it is an edge of the part, 35 > 30)."""
+    surface = load_surface(_ridge(35.0))
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, 1.0)
+    assert curvature_asks(surface, frame, per_turn, 4, 40.0).empty
+
+
+def _plate_with_hole() -> manifold3d.Manifold:
+    return manifold3d.Manifold.cube((12, 12, 3)) - manifold3d.Manifold.cylinder(5, 1.5, 1.5, 96).translate((6, 6, -1))
+
+
+def _edges_on_hole(result) -> np.ndarray:
+    """Longest edge of each boundary triangle on the hole's wall (radius 1.5 about (6, 6))."""
+    p, f = result.mesh.points, result.boundary_faces
+    n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    c = p[f].mean(axis=1)
+    on = (np.abs(np.hypot(c[:, 0] - 6, c[:, 1] - 6) - 1.5) < 0.05) & (np.abs(n[:, 2]) < 0.5 * np.linalg.norm(n, axis=1))
+    return np.linalg.norm(p[f[on]] - p[np.roll(f[on], 1, axis=1)], axis=2).max(axis=1)
+
+
+def test_curvature_refines_the_hole_and_keeps_the_bound():
+    """Size 1 with 24 elements per turn on a hole of radius 1.5: 2 pi r / N = 0.39, two levels
+    below size.  Nearly all the hole's boundary triangles get there (a few beside coarser
+    leaves' warped corners reach twice the level's edge), against few without; every tet
+    within the dihedral bound; the same mesh twice."""
+    plain = paroct.mesh(_plate_with_hole(), size=1.0)
+    sized = paroct.mesh(_plate_with_hole(), size=1.0, curvature=24)
+    target = 2 * math.pi * 1.5 / 24
+    assert np.mean(_edges_on_hole(plain) <= target) < 0.2
+    edges = _edges_on_hole(sized)
+    assert np.mean(edges <= target) > 0.95
+    assert edges.max() <= 2 * 0.25 * (1 + 1e-6)
+    assert DIHEDRAL_BOUND[0] <= sized.report.min_dihedral <= sized.report.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert sized.report.n_tets < 2 * plain.report.n_tets  # only near the hole
+    assert any("curves more than 24 elements per turn" in note for note in sized.report.notes)
+    again = paroct.mesh(_plate_with_hole(), size=1.0, curvature=24)
+    assert np.array_equal(again.mesh.tets, sized.mesh.tets) and np.array_equal(again.mesh.points, sized.mesh.points)
+
+
+def test_layers_refine_a_thin_slab():
+    """A slab 1.2 thick at size 1 with 5 layers: the band on its faces at 1/8 (the first
+    half-size below 1.2 / 5), the faces' boundary edges mostly under 0.24; within the bound."""
+    result = paroct.mesh(manifold3d.Manifold.cube((8, 8, 1.2)), size=1.0, layers=5)
+    p, f = result.mesh.points, result.boundary_faces
+    c = p[f].mean(axis=1)
+    faces = (np.abs(c[:, 2]) < 1e-6) | (np.abs(c[:, 2] - 1.2) < 1e-6)
+    edges = np.linalg.norm(p[f[faces]] - p[np.roll(f[faces], 1, axis=1)], axis=2).max(axis=1)
+    assert np.mean(edges <= 1.2 / 5) > 0.95
+    assert any("walls thinner than 5 x size" in note for note in result.report.notes)
+    assert DIHEDRAL_BOUND[0] <= result.report.min_dihedral <= result.report.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert abs(result.report.volume_error) < 0.01
+
+
+def test_nothing_asked_leaves_the_mesh_unchanged():
+    """A box has no curvature and no wall thinner than 2 x size: the same mesh as without."""
+    box = manifold3d.Manifold.cube((4, 5, 6))
+    plain = paroct.mesh(box, size=0.5)
+    sized = paroct.mesh(box, size=0.5, curvature=12, layers=2)
+    assert np.array_equal(plain.mesh.tets, sized.mesh.tets) and np.array_equal(plain.mesh.points, sized.mesh.points)
+
+
+@pytest.mark.parametrize("bad", [0, -2.0, float("nan"), float("inf"), "12", True])
+@pytest.mark.parametrize("name", ["curvature", "layers"])
+def test_bad_values_are_refused(name, bad):
+    with pytest.raises(ParoctError, match=name):
+        paroct.mesh(manifold3d.Manifold.cube((1, 1, 1)), size=0.5, **{name: bad})
+
+
+def test_cli_curvature_and_layers(tmp_path, capsys):
+    out = tmp_path / "a.vtu"
+    assert main(["mesh", str(DATA / "angle_block.stl"), "--curvature", "16", "--layers", "3", "-o", str(out)]) == 0
+    assert out.exists()
+    assert "curves more than 16 elements per turn" in capsys.readouterr().out
+    assert main(["mesh", str(DATA / "angle_block.stl"), "--layers", "0", "-o", str(out)]) == 2
+    assert "--layers" in capsys.readouterr().err
