@@ -31,7 +31,7 @@ import numpy as np
 
 from .boundary import surface_patches
 from .features import ThinFeatures, face_normals
-from .frame import FatFrame
+from .frame import SPACE_TO_LATTICE, FatFrame
 from .surface import Surface
 
 
@@ -95,7 +95,7 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
     patches = surface_patches(surface, min(feature_angle, 360 / per_turn))
     limit = 2 * np.pi / per_turn
     pieces, owner = triangle_pieces(vertices[faces], frame.h)
-    centres, bend, group = _bends(frame, 0, pieces, owner, patches, normals)
+    centres, bend, group = _bends(frame, 0, *_piece_measures(frame, 0, pieces), patches[owner], normals[owner])
     too_bent = bend > limit
     points, depth, smallest = [], [], np.inf
     for d in range(max_depth):
@@ -107,12 +107,13 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
         near = _near_cells(np.floor(frame.to_lattice(centres) * 2**d).astype(np.int64)[group], bent)
         level_pieces = pieces
         pieces, child_of = triangle_pieces(pieces[near], frame.h / 2 ** (d + 1))
-        finer_cells = np.floor(frame.to_lattice(pieces.mean(axis=1)) * 2 ** (d + 1)).astype(np.int64)
+        centroids, area, finer_cells = _piece_measures(frame, d + 1, pieces)
         core = _near_cells(finer_cells // 2, bent, ring=False)
         keep = _near_cells(finer_cells, finer_cells[core])
         pieces, child_of, core = pieces[keep], child_of[keep], core[keep]
         parent, owner = group[near][child_of], owner[near][child_of]
-        finer_centres, finer_bend, finer_group = _bends(frame, d + 1, pieces, owner, patches, normals, core)
+        finer_centres, finer_bend, finer_group = _bends(frame, d + 1, centroids[keep], area[keep], finer_cells[keep],
+                                                        patches[owner], normals[owner], core)
         # A cell is asked finer if the worst of its pieces' finer cells bends less than it:
         # a fillet's bend halves; a crease's stays, and noise rarely halves everywhere.
         worst_child = np.zeros(bend.shape[0])
@@ -137,15 +138,37 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
                        + f"up to {int(depth.max())} level{'s' * int(depth.max() > 1)} finer)")
 
 
-def _bends(frame: FatFrame, depth: int, pieces: np.ndarray, owner: np.ndarray, patches: np.ndarray,
-           normals: np.ndarray, measure: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """bent_cells of the pieces (S, 3, 3) of triangles owner (S,) in the cells of frame's
-    lattice ``depth`` levels finer, the curvature times the cells' edge: (centres, bend,
-    group of each piece); measure (S,): as in bent_cells."""
-    centroids = pieces.mean(axis=1)
-    area = 0.5 * np.linalg.norm(np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0]), axis=1)
-    cells = np.floor(frame.to_lattice(centroids) * 2**depth).astype(np.int64)
-    centres, curvature, group = bent_cells(cells, patches[owner], centroids, normals[owner], area, measure)
+def _piece_measures(frame: FatFrame, depth: int, pieces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroids (P, 3), areas (P,) and the cells (P, 3) int64 of frame's lattice ``depth``
+    levels finer that hold the centroids, of the triangles pieces (P, 3, 3)."""
+    return _measures(np.ascontiguousarray(pieces), np.ascontiguousarray(frame.origin, dtype=np.float64),
+                     2.0**depth / frame.h, SPACE_TO_LATTICE.astype(np.float64))
+
+
+@nb.njit(cache=True)
+def _measures(pieces, origin, scale, matrix):
+    n = pieces.shape[0]
+    centroids, area, cells = np.empty((n, 3)), np.empty(n), np.empty((n, 3), dtype=np.int64)
+    for t in range(n):
+        for k in range(3):
+            centroids[t, k] = (pieces[t, 0, k] + pieces[t, 1, k] + pieces[t, 2, k]) / 3
+        ux, uy, uz = pieces[t, 1, 0] - pieces[t, 0, 0], pieces[t, 1, 1] - pieces[t, 0, 1], pieces[t, 1, 2] - pieces[t, 0, 2]
+        vx, vy, vz = pieces[t, 2, 0] - pieces[t, 0, 0], pieces[t, 2, 1] - pieces[t, 0, 1], pieces[t, 2, 2] - pieces[t, 0, 2]
+        area[t] = 0.5 * np.sqrt((uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2 + (ux * vy - uy * vx) ** 2)
+        for i in range(3):
+            u = 0.0
+            for k in range(3):
+                u += matrix[i, k] * (centroids[t, k] - origin[k])
+            cells[t, i] = np.int64(np.floor(u * scale))
+    return centroids, area, cells
+
+
+def _bends(frame: FatFrame, depth: int, centroids: np.ndarray, area: np.ndarray, cells: np.ndarray,
+           patch: np.ndarray, normals: np.ndarray, measure: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """bent_cells of pieces (their centroids, areas, cells of frame's lattice ``depth`` levels
+    finer: _piece_measures; their patches and unit normals), the curvature times the cells'
+    edge: (centres, bend, group of each piece); measure (P,): as in bent_cells."""
+    centres, curvature, group = bent_cells(cells, patch, centroids, normals, area, measure)
     return centres, curvature * (frame.h / 2**depth), group
 
 
@@ -172,13 +195,41 @@ _AROUND = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (
 def _near_cells(cells: np.ndarray, marked: np.ndarray, ring: bool = True) -> np.ndarray:
     """Mask (S,) of the cells (S, 3) among the marked cells (B, 3, repeats allowed), or next
     to one (26 around) with ring."""
-    lo = np.minimum(cells.min(axis=0), marked.min(axis=0)) - 1
-    span = np.maximum(cells.max(axis=0), marked.max(axis=0)) - lo + 2
-    around = (marked[:, None, :] + _AROUND[None]).reshape(-1, 3) if ring else marked
-    table = np.unique(_linear(around, lo, span))
-    keys = _linear(cells, lo, span)
-    at = np.minimum(np.searchsorted(table, keys), table.size - 1)
-    return table[at] == keys
+    return _near(np.ascontiguousarray(cells, dtype=np.int64), np.ascontiguousarray(marked, dtype=np.int64), ring)
+
+
+@nb.njit(cache=True)
+def _near(cells, marked, ring):
+    lo = np.empty(3, dtype=np.int64)
+    span = np.empty(3, dtype=np.int64)
+    for k in range(3):
+        lo[k] = min(cells[:, k].min(), marked[:, k].min()) - 1
+        span[k] = max(cells[:, k].max(), marked[:, k].max()) - lo[k] + 2
+    reach = 1 if ring else 0
+    keys = np.empty(marked.shape[0], dtype=np.int64)
+    for b in range(marked.shape[0]):
+        keys[b] = ((marked[b, 0] - lo[0]) * span[1] + (marked[b, 1] - lo[1])) * span[2] + (marked[b, 2] - lo[2])
+    keys.sort()
+    unique = 0
+    for b in range(keys.shape[0]):
+        if b == 0 or keys[b] != keys[b - 1]:
+            keys[unique] = keys[b]
+            unique += 1
+    table = np.empty(unique * (2 * reach + 1) ** 3, dtype=np.int64)
+    n = 0
+    for b in range(unique):
+        for dx in range(-reach, reach + 1):
+            for dy in range(-reach, reach + 1):
+                for dz in range(-reach, reach + 1):
+                    table[n] = keys[b] + (dx * span[1] + dy) * span[2] + dz
+                    n += 1
+    table.sort()
+    out = np.empty(cells.shape[0], dtype=np.bool_)
+    for s in range(cells.shape[0]):
+        key = ((cells[s, 0] - lo[0]) * span[1] + (cells[s, 1] - lo[1])) * span[2] + (cells[s, 2] - lo[2])
+        at = np.searchsorted(table, key)
+        out[s] = at < n and table[at] == key
+    return out
 
 
 def _linear(cells: np.ndarray, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
@@ -199,8 +250,7 @@ def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[np.ndarray, np
     parent = np.arange(pieces.shape[0])
     done_pieces, done_parent = [], []
     while pieces.shape[0]:
-        longest = np.max(np.sum((pieces - np.roll(pieces, 1, axis=1)) ** 2, axis=2), axis=1)
-        small = longest <= spacing * spacing
+        small = _short_enough(pieces, float(spacing))
         done_pieces.append(pieces[small])
         done_parent.append(parent[small])
         pieces, parent = pieces[~small], parent[~small]
@@ -211,6 +261,21 @@ def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[np.ndarray, np
     pieces, parent = np.concatenate(done_pieces), np.concatenate(done_parent)
     order = np.argsort(parent, kind="stable")
     return pieces[order], parent[order]
+
+
+@nb.njit(cache=True)
+def _short_enough(pieces, spacing):
+    """Mask (P,) of the pieces with no edge longer than spacing."""
+    out = np.empty(pieces.shape[0], dtype=np.bool_)
+    for t in range(pieces.shape[0]):
+        longest = 0.0
+        for j in range(3):
+            d = 0.0
+            for m in range(3):
+                d += (pieces[t, (j + 1) % 3, m] - pieces[t, j, m]) ** 2
+            longest = max(longest, d)
+        out[t] = longest <= spacing * spacing
+    return out
 
 
 @nb.njit(cache=True)
