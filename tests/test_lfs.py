@@ -215,3 +215,28 @@ def test_cli_curvature_and_layers(tmp_path, capsys):
     assert "curves more than 16 elements per turn" in capsys.readouterr().out
     assert main(["mesh", str(DATA / "angle_block.stl"), "--layers", "0", "-o", str(out)]) == 2
     assert "--layers" in capsys.readouterr().err
+
+
+def test_info_says_where_curvature_and_layers_refine(capsys):
+    """paroct info --curvature: the levels and an upper estimate of the tets, at least the
+    mesh's; nothing asked on a box."""
+    assert main(["info", str(DATA / "angle_block.stl"), "--curvature", "16"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("--curvature 16:"))
+    estimate = float(line.split("at most about ")[1].split(" tets")[0])
+    made = paroct.mesh(DATA / "angle_block.stl", curvature=16).report.n_tets
+    assert estimate >= made
+    assert main(["info", str(DATA / "angle_block.stl"), "--layers", "2", "--size", "0.02"]) == 0
+    assert "--layers 2: nothing finer than size asked" in capsys.readouterr().out
+    assert main(["info", str(DATA / "angle_block.stl"), "--curvature", "0"]) == 2
+    assert "--curvature" in capsys.readouterr().err
+
+
+def test_asks_that_do_not_fit_warn_and_mesh_without_them():
+    """A memory budget the refined band does not fit: the plain mesh, and a warning saying the
+    curvature was not honoured and why (not a silent coarser mesh)."""
+    plain = paroct.mesh(_plate_with_hole(), size=1.0)
+    budget = 2 * plain.report.n_tets * 250  # room for the plain passes, not for size / 8 on the hole
+    result = paroct.mesh(_plate_with_hole(), size=1.0, curvature=48, max_memory=budget)
+    assert result.report.n_tets == plain.report.n_tets
+    assert any("not honoured" in w and "memory" in w for w in result.report.warnings)

@@ -127,14 +127,19 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="describe a surface before meshing it",
                        description="Describe the solid bounded by SURFACE: its shells, genus, volume and box, the "
                        "named groups it holds (the patches --patches writes), its patches and corners at a feature "
-                       "angle, the tets and memory one pass at the size would take (an upper estimate), and the "
-                       "walls and gaps thinner than twice the size.")
+                       "angle, the tets and memory one pass at the size would take (an upper estimate), the "
+                       "walls and gaps thinner than twice the size, and where --curvature and --layers would refine.")
     i.add_argument("surface", metavar="SURFACE", help="closed surface file: .stl, .obj, .off, .ply or .msh (a Gmsh surface mesh)")
     sized = i.add_mutually_exclusive_group()
     sized.add_argument("--size", type=float, metavar="H", help="finest long edge, as for mesh")
     sized.add_argument("--divisions", type=float, metavar="N", help="size = bounding-box diagonal / N (default 40)")
     i.add_argument("--feature-angle", type=float, default=DEFAULT_FEATURE_ANGLE, metavar="ANGLE",
                    help=f"split the surface into patches at edges sharper than ANGLE degrees (default {DEFAULT_FEATURE_ANGLE:g})")
+    i.add_argument("--curvature", type=float, metavar="N", help="also say where mesh --curvature N would refine, and "
+                   "the tets it would take at most")
+    i.add_argument("--layers", type=float, metavar="K", help="also say where mesh --layers K would refine, and the "
+                   "tets it would take at most")
+    i.add_argument("--min-size", type=float, metavar="H", help="as for mesh (default size / 16)")
     i.set_defaults(run=_run_info)
 
     p = sub.add_parser("paper-table", help="recompute the seed paper's Table 1, with errata",
@@ -289,9 +294,12 @@ def _run_info(args: argparse.Namespace) -> int:
     from .boundary import surface_patches
     from .mesher import BYTES_PER_TET, estimate_tets, resolve_size
     from .sharp import feature_curves
-    from .sizing import size_field
+    from .sizing import positive_number, size_field
     from .surface import load_surface
 
+    for name, value in (("--curvature", args.curvature), ("--layers", args.layers), ("--min-size", args.min_size)):
+        if value is not None:
+            positive_number(name, value)
     surface = load_surface(args.surface)
     size = resolve_size(surface, args.size, args.divisions)
     lo, hi = surface.bbox_min, surface.bbox_max
@@ -318,8 +326,32 @@ def _run_info(args: argparse.Namespace) -> int:
     lines.append(f"size {size:.6g} (diagonal / {surface.diagonal / size:.4g}): one pass at this size makes at most "
                  f"about {tets:.3g} tets in {tets * BYTES_PER_TET / 2**30:.3g} GiB (graded, max_size 8 x size)")
     lines.append(_thin_places(surface, size))
+    if args.curvature is not None or args.layers is not None:
+        lines.append(_feature_sizing(surface, size, args.curvature, args.layers, args.min_size))
     print("\n".join(lines))
     return EXIT_OK
+
+
+def _feature_sizing(surface, size: float, curvature: float | None, layers: float | None, min_size: float | None) -> str:
+    """Where mesh's curvature and layers would refine the boundary, and the tets a pass with
+    them would make at most (mesher._local_tets: about 3-7 x a first pass near thin walls)."""
+    from .frame import fat_frame
+    from .mesher import BYTES_PER_TET, DEFAULT_MIN_SIZE_DIVISOR, _asked_levels, _feature_asks, _local_tets
+    from .sizing import size_field
+
+    field = size_field(size, curvature=curvature, layers=layers)
+    floor = size / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else min(min_size, size)
+    asks = _feature_asks(surface, field, floor)
+    options = " ".join(f"--{name} {value:g}" for name, value in (("curvature", curvature), ("layers", layers))
+                       if value is not None)
+    if asks.empty:
+        return f"{options}: nothing finer than size asked"
+    deepest = int(asks.depth.max())
+    wanted = _asked_levels(fat_frame(surface.bbox_min, surface.bbox_max, size), deepest, asks)
+    tets = _local_tets(surface, field, wanted)
+    return (f"{options}: the boundary refined to {size / 2**deepest:.4g} at most where {asks.why}, in "
+            f"{wanted.keys.size} cells of size; one pass makes at most about {tets:.3g} tets in "
+            f"{tets * BYTES_PER_TET / 2**30:.3g} GiB")
 
 
 def _thin_places(surface, size: float) -> str:

@@ -38,10 +38,13 @@ from .surface import Surface
 @dataclass(frozen=True)
 class FeatureAsks:
     """Where the boundary must be finer than size: points (S, 3) float64 in model units,
-    depth (S,) int64 levels below size (>= 1) at each, and a line saying why for the notes."""
+    depth (S,) int64 levels below size (>= 1) at each, ring (S,) int64 the coarse cells
+    around each point's that share its ask (band.band_levels), and a line saying why for
+    the notes."""
 
     points: np.ndarray
     depth: np.ndarray
+    ring: np.ndarray
     why: str
 
     @property
@@ -53,17 +56,18 @@ class FeatureAsks:
         if levels <= 0:
             return self
         keep = self.depth > levels
-        return FeatureAsks(self.points[keep], self.depth[keep] - levels, self.why)
+        return FeatureAsks(self.points[keep], self.depth[keep] - levels, self.ring[keep], self.why)
 
 
 def no_asks() -> FeatureAsks:
-    return FeatureAsks(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), "")
+    return FeatureAsks(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), "")
 
 
 def merged_asks(a: FeatureAsks, b: FeatureAsks) -> FeatureAsks:
     """Both sets of asks (a's first); why joins the non-empty texts."""
     why = " and ".join(w for w in (a.why, b.why) if w)
-    return FeatureAsks(np.concatenate([a.points, b.points]), np.concatenate([a.depth, b.depth]), why)
+    return FeatureAsks(np.concatenate([a.points, b.points]), np.concatenate([a.depth, b.depth]),
+                       np.concatenate([a.ring, b.ring]), why)
 
 
 #: A bend measured at one scale is resolved by finer elements only if it shrinks when measured
@@ -132,7 +136,7 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
     if not points:
         return no_asks()
     depth = np.concatenate(depth)
-    return FeatureAsks(np.concatenate(points), depth,
+    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64),
                        f"the surface curves more than {per_turn:g} elements per turn allow ("
                        + (f"smallest radius about {smallest:.4g}, " if np.isfinite(smallest) else "")
                        + f"up to {int(depth.max())} level{'s' * int(depth.max() > 1)} finer)")
@@ -472,12 +476,13 @@ def _find(group_patch, group_cell, patch, cell):
 
 def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -> FeatureAsks:
     """Asks for layers elements across each wall sample (is_wall, thickness t > 0) thinner than
-    layers * size: depth ceil(log2(layers * size / t)), clipped to [1, max_depth]."""
+    layers * size: depth ceil(log2(layers * size / t)), clipped to [1, max_depth], with the
+    ring of one coarse cell (the samples lie on the wall's first side, a lattice row apart)."""
     thin = np.flatnonzero(walls.is_wall & (walls.thickness > 0) & (walls.thickness < layers * size))
     if max_depth < 1 or thin.size == 0:
         return no_asks()
     t = walls.thickness[thin]
     depth = np.clip(np.ceil(np.log2(layers * size / t) - 1e-9), 1, max_depth).astype(np.int64)
-    return FeatureAsks(walls.points[thin], depth,
+    return FeatureAsks(walls.points[thin], depth, np.ones(depth.size, dtype=np.int64),
                        f"{thin.size} samples of walls thinner than {layers:g} x size = {layers * size:.4g} "
                        f"(thinnest {t.min():.4g})")

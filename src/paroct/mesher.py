@@ -402,16 +402,18 @@ def _whole_pass(surface: Surface, field: SizeField, band: float, asks: FeatureAs
     """One pass with the whole band at size band (field.size / 2**k), refined further where
     asks (depths below field.size) ask for finer than band: _mesh_at, or with asks
     _mesh_with_asks.  Returns _mesh_at's (result, lost, advice, walls), the pass's report
-    (``report`` unless asks made their own) and a note ('' if none)."""
+    (``report`` unless asks made their own) and a note ('' if none).  Should the band not be
+    refined as asked (memory, a frame too deep, tets outside the bound after the rounds), the
+    pass is made without the asks and its report warns."""
     finer = asks.deeper_than(int(round(np.log2(field.size / band))))
     attempt = _at_boundary_size(field, band)
-    note = ""
     if not finer.empty:
         sized = _mesh_with_asks(surface, attempt, finer, budget, progress, stage_seconds)
         if isinstance(sized, tuple):
             return sized
-        note = f"the boundary was not refined where {finer.why}: {sized}"
-    return *_mesh_at(surface, attempt, report, progress), report, note
+        report.warnings.append(f"curvature and layers not honoured at boundary size {band:.4g}: the boundary was not "
+                               f"refined where {finer.why}: {sized}")
+    return *_mesh_at(surface, attempt, report, progress), report, ""
 
 
 def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budget: float,
@@ -424,8 +426,7 @@ def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budge
     frame = _refined_frame(coarse, deepest)
     if frame.levels > MAX_FRAME_LEVELS:
         return f"a frame of {frame.levels} levels is too deep"
-    wanted = band_levels(frame, coarse.levels, coarse.to_lattice(asks.points) * 2.0**deepest, coarse.levels + asks.depth,
-                         ring=0)
+    wanted = _asked_levels(coarse, deepest, asks)
     framed = FramedSurface.build(surface, frame, coarse.levels)
     result, report, rounds, why = _refine_rounds(surface, field, framed, wanted, budget, progress, stage_seconds)
     if result is None:
@@ -963,15 +964,27 @@ def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int
     with base's asks too (None if no wall or gap asks: K = 0, or a frame deeper than
     MAX_FRAME_LEVELS)."""
     points, depth = _thin_asks(coarse, walls, max_depth, extra)
-    all_points, all_depth = points, depth
-    if depth.size and not base.empty:
-        all_points = np.concatenate([points, coarse.to_lattice(base.points)])
-        all_depth = np.concatenate([depth, base.depth])
-    deepest = int(all_depth.max(initial=0))
+    deepest = max(int(depth.max(initial=0)), int(base.depth.max(initial=0)))
     frame = _refined_frame(coarse, deepest)
     if depth.size == 0 or frame.levels > MAX_FRAME_LEVELS:
         return frame, depth, None
-    return frame, depth, band_levels(frame, coarse.levels, all_points * 2.0**deepest, coarse.levels + all_depth)
+    walls_asked = band_levels(frame, coarse.levels, points * 2.0**deepest, coarse.levels + depth)
+    if base.empty:
+        return frame, depth, walls_asked
+    return frame, depth, merge_band_levels(walls_asked, _asked_levels(coarse, deepest, base))
+
+
+def _asked_levels(coarse: FatFrame, deepest: int, asks: FeatureAsks) -> BandLevels:
+    """The band levels asks ask for, in the frame ``deepest`` levels below coarse, each point
+    with its ring."""
+    frame = _refined_frame(coarse, deepest)
+    asked = no_band_levels(coarse.levels)
+    coords = coarse.to_lattice(asks.points) * 2.0**deepest
+    for ring in np.unique(asks.ring).tolist():
+        mine = asks.ring == ring
+        asked = merge_band_levels(asked, band_levels(frame, coarse.levels, coords[mine], coarse.levels + asks.depth[mine],
+                                                     ring=ring))
+    return asked
 
 
 def _thin_asks(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int) -> tuple[np.ndarray, np.ndarray]:
