@@ -476,13 +476,19 @@ def _find(group_patch, group_cell, patch, cell):
 
 def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -> FeatureAsks:
     """Asks for layers elements across each wall sample (is_wall, thickness t > 0) thinner than
-    layers * size: depth ceil(log2(layers * size / t)), clipped to [1, max_depth], with the
-    ring of one coarse cell (the samples lie on the wall's first side, a lattice row apart)."""
-    thin = np.flatnonzero(walls.is_wall & (walls.thickness > 0) & (walls.thickness < layers * size))
-    if max_depth < 1 or thin.size == 0:
+    layers * size: depth ceil(log2(layers * size / t)), with the ring of one coarse cell (the
+    samples lie on the wall's first side, a lattice row apart).  Walls that would need more
+    than max_depth levels cannot have their layers: they are left to the thin-wall rounds,
+    which refine near them only if the mesh loses them (asked to max_depth, a sliver of a CSG
+    part 1e-7 thick came apart into more boundary components than the input's)."""
+    if max_depth < 1:
         return no_asks()
-    t = walls.thickness[thin]
-    depth = np.clip(np.ceil(np.log2(layers * size / t) - 1e-9), 1, max_depth).astype(np.int64)
-    return FeatureAsks(walls.points[thin], depth, np.ones(depth.size, dtype=np.int64),
+    need = np.full(walls.thickness.shape[0], max_depth + 1, dtype=np.int64)
+    measured = walls.is_wall & (walls.thickness > 0) & (walls.thickness < layers * size)
+    need[measured] = np.maximum(np.ceil(np.log2(layers * size / walls.thickness[measured]) - 1e-9), 1)
+    thin = np.flatnonzero(need <= max_depth)
+    if thin.size == 0:
+        return no_asks()
+    return FeatureAsks(walls.points[thin], need[thin], np.ones(thin.size, dtype=np.int64),
                        f"{thin.size} samples of walls thinner than {layers:g} x size = {layers * size:.4g} "
-                       f"(thinnest {t.min():.4g})")
+                       f"(thinnest {walls.thickness[thin].min():.4g})")
