@@ -240,3 +240,64 @@ def test_asks_that_do_not_fit_warn_and_mesh_without_them():
     result = paroct.mesh(_plate_with_hole(), size=1.0, curvature=48, max_memory=budget)
     assert result.report.n_tets == plain.report.n_tets
     assert any("not honoured" in w and "memory" in w for w in result.report.warnings)
+
+
+@pytest.fixture(scope="module")
+def named_box_file(tmp_path_factory):
+    from .test_groups import NAMES, SIDE_FACES, _stl_solid
+
+    path = tmp_path_factory.mktemp("patch_sizes") / "box.stl"
+    path.write_text("".join(_stl_solid(name, faces) for name, faces in zip(NAMES, SIDE_FACES)))
+    return path
+
+
+def _side_edges(result, size: float) -> list[np.ndarray]:
+    """Longest edge of each boundary triangle on each side of the 1 x 2 x 3 box (away from its edges)."""
+    from .test_groups import _side_of
+
+    p, f = result.mesh.points, result.boundary_faces
+    side = _side_of(p[f].mean(axis=1), size)
+    edges = np.linalg.norm(p[f] - p[np.roll(f, 1, axis=1)], axis=2).max(axis=1)
+    return [edges[side == k] for k in range(6)]
+
+
+def test_patch_sizes_refine_only_their_patches(named_box_file):
+    """The box's named sides at size 0.1: 'top' asked 0.03 (two levels, 0.025) and 'left' 0.06
+    (one level, 0.05); their boundary triangles get there, the other sides keep 0.1; within the
+    bound; the note names them."""
+    result = paroct.mesh(named_box_file, size=0.1, patch_sizes={"top": 0.03, "left": 0.06})
+    edges = _side_edges(result, 0.1)
+    assert np.percentile(edges[1], 95) <= 0.03 and np.percentile(edges[5], 95) <= 0.06
+    for k in (0, 2, 3, 4):
+        assert np.median(edges[k]) > 0.06
+    assert DIHEDRAL_BOUND[0] <= result.report.min_dihedral <= result.report.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert any("patch 'top' asks 0.03 and patch 'left' asks 0.06" in note for note in result.report.notes)
+
+
+def test_patch_sizes_by_angle_and_notes(named_box_file):
+    """Without named groups the patches are patch_1, ... at 40 degrees; a size of at least size
+    asks nothing and says so; an unknown name is refused with the names there are."""
+    box = manifold3d.Manifold.cube((1, 2, 3))
+    result = paroct.mesh(box, size=0.2, patch_sizes={"patch_1": 0.5, "patch_2": 0.05})
+    assert any("patch 'patch_1' asks size 0.5, at least size" in note for note in result.report.notes)
+    assert any("patch 'patch_2' asks 0.05" in note for note in result.report.notes)
+    with pytest.raises(ParoctError, match="'patch_7' is not one of the surface's 6 patches"):
+        paroct.mesh(box, size=0.2, patch_sizes={"patch_7": 0.1})
+    with pytest.raises(ParoctError, match="'tpo' is not one of the surface's 6 named groups: 'bottom', 'top'"):
+        paroct.mesh(named_box_file, size=0.2, patch_sizes={"tpo": 0.1})
+    with pytest.raises(ParoctError, match="size of patch 'top'"):
+        paroct.mesh(named_box_file, size=0.2, patch_sizes={"top": -1})
+    with pytest.raises(ParoctError, match="patch_sizes"):
+        paroct.mesh(named_box_file, size=0.2, patch_sizes=3)
+
+
+def test_cli_refine_patch(named_box_file, tmp_path, capsys):
+    out = tmp_path / "box.vtu"
+    assert main(["mesh", str(named_box_file), "--size", "0.1", "--refine-patch", "top", "0.03", "-o", str(out)]) == 0
+    assert "patch 'top' asks 0.03" in capsys.readouterr().out
+    assert main(["mesh", str(named_box_file), "--refine-patch", "top", "fine", "-o", str(out)]) == 2
+    assert "--refine-patch top fine: the size must be a number" in capsys.readouterr().err
+    assert main(["mesh", str(named_box_file), "--refine-patch", "nowhere", "0.1", "-o", str(out)]) == 2
+    assert "'nowhere' is not one of the surface's 6 named groups" in capsys.readouterr().err
+    assert main(["info", str(DATA / "angle_block.stl")]) == 0
+    assert "  patch_1: 8 triangles" in capsys.readouterr().out

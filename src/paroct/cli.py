@@ -98,6 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="long edge at most H in the box [X0,X1]x[Y0,Y1]x[Z0,Z1] (repeatable)")
     m.add_argument("--refine-sphere", type=float, nargs=5, action="append", default=[],
                    metavar=("X", "Y", "Z", "R", "H"), help="long edge at most H within R of (X, Y, Z) (repeatable)")
+    m.add_argument("--refine-patch", nargs=2, action="append", default=[], metavar=("NAME", "H"),
+                   help="long edge at most H on the boundary patch NAME: one of the input's named groups, or "
+                        f"patch_1, patch_2, ... of the surface split at {DEFAULT_FEATURE_ANGLE:g} degrees (as --patches "
+                        "writes them; paroct info lists them) (repeatable)")
     m.add_argument("--patches", type=float, nargs="?", const=_INPUT_GROUPS, metavar="ANGLE",
                    help="also write the boundary triangles, tagged by surface patch: the input's named groups (the "
                         "solids of an ASCII STL, an OBJ's g groups, a Gmsh file's physical surfaces) if it has them, "
@@ -189,6 +193,12 @@ def _run_mesh(args: argparse.Namespace) -> int:
     for name, value in (("--curvature", args.curvature), ("--layers", args.layers)):
         if value is not None:
             positive_number(name, value)
+    patch_sizes = []
+    for name, text in args.refine_patch:
+        try:
+            patch_sizes.append((name, positive_number(f"--refine-patch {name}", float(text))))
+        except ValueError:
+            raise ParoctError(f"--refine-patch {name} {text}: the size must be a number") from None
     if not out.parent.is_dir():
         raise ParoctError(f"{out}: folder {out.parent} does not exist")
     max_memory = None
@@ -210,7 +220,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
     t_loaded = time.perf_counter()
     max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
     result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
-                  curvature=args.curvature, layers=args.layers, thin_features=not args.keep_size, min_size=args.min_size,
+                  curvature=args.curvature, layers=args.layers, patch_sizes=patch_sizes,
+                  thin_features=not args.keep_size, min_size=args.min_size,
                   max_memory=max_memory, progress=progress if args.verbose else None)
     if args.sharp_edges is not None:
         result = result.with_sharp_edges(None if args.sharp_edges is _INPUT_GROUPS else args.sharp_edges)
@@ -322,6 +333,8 @@ def _run_info(args: argparse.Namespace) -> int:
     curves = feature_curves(surface, labels)
     lines.append(f"at {args.feature_angle:g} degrees: {int(labels.max(initial=0))} patches, {len(curves.segments)} "
                  f"edges between them, {len(curves.corners)} corners")
+    if surface.face_groups is None:
+        lines += _patch_lines(surface, labels)
     tets = estimate_tets(surface, size_field(size))
     lines.append(f"size {size:.6g} (diagonal / {surface.diagonal / size:.4g}): one pass at this size makes at most "
                  f"about {tets:.3g} tets in {tets * BYTES_PER_TET / 2**30:.3g} GiB (graded, max_size 8 x size)")
@@ -341,7 +354,7 @@ def _feature_sizing(surface, size: float, curvature: float | None, layers: float
 
     field = size_field(size, curvature=curvature, layers=layers)
     floor = size / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else min(min_size, size)
-    asks = _feature_asks(surface, field, floor)
+    asks, _ = _feature_asks(surface, field, floor)
     options = " ".join(f"--{name} {value:g}" for name, value in (("curvature", curvature), ("layers", layers))
                        if value is not None)
     if asks.empty:
@@ -352,6 +365,24 @@ def _feature_sizing(surface, size: float, curvature: float | None, layers: float
     return (f"{options}: the boundary refined to {size / 2**deepest:.4g} at most where {asks.why}, in "
             f"{wanted.keys.size} cells of size; one pass makes at most about {tets:.3g} tets in "
             f"{tets * BYTES_PER_TET / 2**30:.3g} GiB")
+
+
+def _patch_lines(surface, labels: np.ndarray) -> list[str]:
+    """One line per patch (up to _LISTED_PATCHES, largest first): its name as --patches and
+    --refine-patch know it, triangles, area and area-weighted centre."""
+    tris = surface.vertices[surface.faces]
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    n = int(labels.max(initial=0))
+    counts = np.bincount(labels, minlength=n + 1)[1:]
+    areas = np.bincount(labels, area, minlength=n + 1)[1:]
+    centres = np.stack([np.bincount(labels, area * tris[:, :, k].mean(axis=1), minlength=n + 1)[1:] for k in range(3)],
+                       axis=1) / np.maximum(areas, np.finfo(float).tiny)[:, None]
+    order = np.argsort(-areas, kind="stable")[:_LISTED_PATCHES]
+    lines = [f"  patch_{k + 1}: {counts[k]} triangles, area {areas[k]:.4g}, centre ({centres[k, 0]:.4g}, "
+             f"{centres[k, 1]:.4g}, {centres[k, 2]:.4g})" for k in order]
+    if n > _LISTED_PATCHES:
+        lines.append(f"  ... and {n - _LISTED_PATCHES} more (the largest are listed)")
+    return lines
 
 
 def _thin_places(surface, size: float) -> str:

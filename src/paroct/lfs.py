@@ -1,6 +1,6 @@
 """Local feature size: where the boundary must be finer than size, read off the surface.
 
-Two measures, each only when the user asks for it (SizeField.curvature, SizeField.layers):
+Three asks, each only when the user makes it (SizeField.curvature, .layers, .patch_sizes):
 
 - **curvature** N: boundary elements of long edge at most 2 pi r / N where the surface bends
   with radius r (N elements per full turn, as Gmsh's Mesh.MeshSizeFromCurvature).  The
@@ -16,6 +16,11 @@ Two measures, each only when the user asks for it (SizeField.curvature, SizeFiel
   K x size: long edge at most t / K for a wall of thickness t, from the thickness samples that
   the lattice rows measure (features.thin_features).
 
+- **patch sizes**: a long edge asked on a named patch of the boundary (the input's named
+  groups, else patch_1, patch_2, ... of the surface split at the feature angle, as
+  MeshResult.boundary_patches names them): the patch's triangles ask the levels below size
+  that reach it (patch_asks).
+
 Each gives asks: points (S, 3) in model units and depths (S,) int64, the levels below size
 each point needs (1 or more, at most max_depth).  The mesher turns them into band levels
 (band.band_levels) and refines the band there, measuring and mending the tets where it
@@ -29,7 +34,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .boundary import surface_patches
+from .boundary import surface_labels, surface_patches
+from .errors import ParoctError
 from .features import ThinFeatures, face_normals
 from .frame import SPACE_TO_LATTICE, FatFrame
 from .surface import Surface
@@ -492,3 +498,41 @@ def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -
     return FeatureAsks(walls.points[thin], need[thin], np.ones(thin.size, dtype=np.int64),
                        f"{thin.size} samples of walls thinner than {layers:g} x size = {layers * size:.4g} "
                        f"(thinnest {walls.thickness[thin].min():.4g})")
+
+
+def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth: int) -> tuple[FeatureAsks, list[str]]:
+    """Asks for the long edges patch_sizes ((name, size), ...) asks on named patches of the
+    boundary: the input's named groups if it has them, else the surface split at the default
+    feature angle, named patch_1, patch_2, ... (boundary.surface_labels).  Each patch's
+    triangles, cut to frame.h, ask ceil(log2(frame.h / size)) levels (at most max_depth) in
+    the cells of frame's lattice they meet.  Returns the asks and notes on sizes not met (at
+    least size: the boundary is nowhere coarser; below the floor max_depth allows).
+    ParoctError for a name the surface does not have, listing those it has."""
+    if not patch_sizes:
+        return no_asks(), []
+    labels, names, _ = surface_labels(surface, None)
+    known = list(names) if names else [f"patch_{k}" for k in range(1, int(labels.max(initial=0)) + 1)]
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    points, depth, notes, asked = [], [], [], []
+    for name, size in patch_sizes:
+        if name not in known:
+            shown = ", ".join(repr(n) for n in known[:20]) + (f" and {len(known) - 20} more" if len(known) > 20 else "")
+            what = "named groups" if names else "patches (no named groups: the surface split at the feature angle)"
+            raise ParoctError(f"patch {name!r} is not one of the surface's {len(known)} {what}: {shown}")
+        levels = int(np.ceil(np.log2(frame.h / size) - 1e-9))
+        if levels < 1:
+            notes.append(f"patch {name!r} asks size {size:.4g}, at least size = {frame.h:.4g}: the boundary is nowhere "
+                         "coarser than size")
+            continue
+        if levels > max_depth:
+            notes.append(f"patch {name!r} asks size {size:.4g}, below min_size: its elements are "
+                         f"{frame.h / 2**max_depth:.4g}")
+            levels = max_depth
+        cells = cells_met(frame, triangle_pieces(surface.vertices[faces[labels == known.index(name) + 1]], frame.h)[0])
+        points.append(frame.to_space(cells + 0.5))
+        depth.append(np.full(cells.shape[0], levels, dtype=np.int64))
+        asked.append(f"patch {name!r} asks {size:.4g}")
+    if not points:
+        return no_asks(), notes
+    depth = np.concatenate(depth)
+    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64), " and ".join(asked)), notes

@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numba as nb
 import numpy as np
@@ -20,7 +20,7 @@ from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
 from .features import ThinFeatures
-from .lfs import FeatureAsks, curvature_asks, merged_asks, no_asks, wall_asks
+from .lfs import FeatureAsks, curvature_asks, merged_asks, no_asks, patch_asks, wall_asks
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
@@ -251,6 +251,7 @@ def mesh(
     size_function: SizeFunction | None = None,
     curvature: float | None = None,
     layers: float | None = None,
+    patch_sizes: Mapping[str, float] | None = None,
     thin_features: bool = True,
     min_size: float | None = None,
     max_memory: int | None = None,
@@ -272,7 +273,10 @@ def mesh(
     thinner than K * size, the boundary there refined to long edges of at most its thickness
     / K (lfs.wall_asks).  Both refine by halves of size, down to min_size (default size /
     16); the band then changes level, and every tet is measured and mended or refined
-    further as near thin walls, so the dihedral bound holds.
+    further as near thin walls, so the dihedral bound holds.  patch_sizes: {name: size}, a
+    long edge for the boundary on named patches (the input's named groups, else patch_1,
+    patch_2, ... of the surface split at 40 degrees, as boundary_patches() names them),
+    refined the same way (lfs.patch_asks).
     thin_features: when the mesh loses topology (boundary components, genus), loses or gains
     more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
     thinner than the lattice dropped), the solid is meshed again: if it missed no surface
@@ -296,7 +300,7 @@ def mesh(
     t0 = time.perf_counter()
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
-    field = size_field(h, max_size, regions, size_function, curvature, layers)
+    field = size_field(h, max_size, regions, size_function, curvature, layers, patch_sizes)
     floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
     floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
     whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
@@ -312,9 +316,10 @@ def mesh(
              f"the finest the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer"
              for region in field.regions if region.size < h]
     band, stage_seconds = h, {"load": loaded}  # stage times add up over the attempts
-    if field.curvature is not None or field.layers is not None:
+    if field.curvature is not None or field.layers is not None or field.patch_sizes:
         t_asks = time.perf_counter()
-        asks = _feature_asks(surface, field, floor)
+        asks, patch_notes = _feature_asks(surface, field, floor)
+        notes.extend(patch_notes)
         stage_seconds["sizing"] = time.perf_counter() - t_asks
         if progress:
             progress("sizing")
@@ -377,23 +382,27 @@ def mesh(
     return result
 
 
-def _feature_asks(surface: Surface, field: SizeField, floor: float) -> FeatureAsks:
-    """Where the size field's curvature and layers (lfs.py) ask for a boundary finer than
-    field.size, down to floor: none unless they are given."""
+def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[FeatureAsks, list[str]]:
+    """Where the size field's curvature, layers and patch sizes (lfs.py) ask for a boundary
+    finer than field.size, down to floor (none unless they are given), and notes on patch
+    sizes that ask nothing."""
     asks = no_asks()
     max_depth = _local_depth(field.size, floor)
-    if max_depth < 1 or (field.curvature is None and field.layers is None):
-        return asks
+    if field.curvature is None and field.layers is None and not field.patch_sizes:
+        return asks, []
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
+    asks, notes = patch_asks(surface, coarse, field.patch_sizes, max_depth)
+    if max_depth < 1:
+        return no_asks(), notes
     if field.curvature is not None:
-        asks = curvature_asks(surface, coarse, field.curvature, max_depth, DEFAULT_FEATURE_ANGLE)
+        asks = merged_asks(asks, curvature_asks(surface, coarse, field.curvature, max_depth, DEFAULT_FEATURE_ANGLE))
     if field.layers is not None:
         snapped = rays.snap_surface(coarse, surface.vertices)
         faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
         crossings = {d: rays.row_crossings(coarse, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
         walls = find_thin_features(coarse, crossings, surface.vertices, faces).facing_below(THIN_FACING)
         asks = merged_asks(asks, wall_asks(walls, field.size, field.layers, max_depth))
-    return asks
+    return asks, notes
 
 
 def _whole_pass(surface: Surface, field: SizeField, band: float, asks: FeatureAsks, budget: float,
@@ -411,7 +420,7 @@ def _whole_pass(surface: Surface, field: SizeField, band: float, asks: FeatureAs
         sized = _mesh_with_asks(surface, attempt, finer, budget, progress, stage_seconds)
         if isinstance(sized, tuple):
             return sized
-        report.warnings.append(f"curvature and layers not honoured at boundary size {band:.4g}: the boundary was not "
+        report.warnings.append(f"curvature, layers or patch sizes not honoured at boundary size {band:.4g}: the boundary was not "
                                f"refined where {finer.why}: {sized}")
     return *_mesh_at(surface, attempt, report, progress), report, ""
 
@@ -685,7 +694,7 @@ def _bytes_text(n: float) -> str:
 def _at_boundary_size(field: SizeField, band: float) -> SizeField:
     """The requested size field with a (smaller) boundary size; a uniform request stays uniform."""
     return size_field(band, band if field.max_size == field.size else field.max_size, field.regions, field.function,
-                      field.curvature, field.layers)
+                      field.curvature, field.layers, field.patch_sizes)
 
 
 def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:

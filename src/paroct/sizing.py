@@ -81,7 +81,8 @@ def _point(name: str, value) -> np.ndarray:
 class SizeField:
     """What the user asked for: finest size, largest interior size, local refinements, and
     the boundary's own refinement (lfs.py): curvature, elements per full turn of the surface
-    (None: not asked), layers, elements across walls (None: not asked)."""
+    (None: not asked), layers, elements across walls (None: not asked), patch_sizes, ((name,
+    size), ...) the long edge asked on named boundary patches."""
 
     size: float
     max_size: float
@@ -89,6 +90,7 @@ class SizeField:
     function: SizeFunction | None = None
     curvature: float | None = None
     layers: float | None = None
+    patch_sizes: tuple = ()
 
     @property
     def coarse_depth(self) -> int:
@@ -98,7 +100,7 @@ class SizeField:
 
 def size_field(size: float, max_size: float | None = None, regions: Sequence[Region] = (),
                function: SizeFunction | None = None, curvature: float | None = None,
-               layers: float | None = None) -> SizeField:
+               layers: float | None = None, patch_sizes=None) -> SizeField:
     """Checked size field.  max_size defaults to DEFAULT_MAX_SIZE_FACTOR * size and is rounded
     down to a power-of-two multiple of size."""
     if max_size is None:
@@ -127,7 +129,25 @@ def size_field(size: float, max_size: float | None = None, regions: Sequence[Reg
     if layers is not None:
         layers = positive_number("layers", layers)
     return SizeField(size=float(size), max_size=float(size * 2**depth), regions=tuple(regions), function=function,
-                     curvature=curvature, layers=layers)
+                     curvature=curvature, layers=layers, patch_sizes=checked_patch_sizes(patch_sizes))
+
+
+def checked_patch_sizes(patch_sizes) -> tuple:
+    """patch_sizes (a mapping of patch name to size, or (name, size) pairs, or None) as a tuple
+    of (str, float) pairs; ParoctError unless each name is a non-empty string and each size a
+    positive number."""
+    if patch_sizes is None:
+        return ()
+    try:
+        pairs = list(patch_sizes.items()) if hasattr(patch_sizes, "items") else [tuple(p) for p in patch_sizes]
+    except TypeError:
+        raise ParoctError(f"patch_sizes = {patch_sizes!r}: must map patch names to sizes") from None
+    out = []
+    for pair in pairs:
+        if len(pair) != 2 or not isinstance(pair[0], str) or not pair[0]:
+            raise ParoctError(f"patch size {pair!r}: must be a patch name (a non-empty string) and a size")
+        out.append((pair[0], positive_number(f"size of patch {pair[0]!r}", pair[1])))
+    return tuple(out)
 
 
 def _octant_boxes(keys: np.ndarray, level: int, frame: FatFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
