@@ -225,20 +225,22 @@ def _near(cells, marked, ring):
         if b == 0 or keys[b] != keys[b - 1]:
             keys[unique] = keys[b]
             unique += 1
-    table = np.empty(unique * (2 * reach + 1) ** 3, dtype=np.int64)
+    # The marked cells moved by the 9 (dx, dy) steps; the 3 dz steps of one are consecutive
+    # keys, so a cell is near when the first table key from its own minus reach is within
+    # 2 reach of it.
+    table = np.empty(unique * (2 * reach + 1) ** 2, dtype=np.int64)
     n = 0
     for b in range(unique):
         for dx in range(-reach, reach + 1):
             for dy in range(-reach, reach + 1):
-                for dz in range(-reach, reach + 1):
-                    table[n] = keys[b] + (dx * span[1] + dy) * span[2] + dz
-                    n += 1
+                table[n] = keys[b] + (dx * span[1] + dy) * span[2]
+                n += 1
     table.sort()
     out = np.empty(cells.shape[0], dtype=np.bool_)
     for s in range(cells.shape[0]):
         key = ((cells[s, 0] - lo[0]) * span[1] + (cells[s, 1] - lo[1])) * span[2] + (cells[s, 2] - lo[2])
-        at = np.searchsorted(table, key)
-        out[s] = at < n and table[at] == key
+        at = np.searchsorted(table, key - reach)
+        out[s] = at < n and table[at] <= key + reach
     return out
 
 
@@ -375,7 +377,7 @@ def bent_cells(cells: np.ndarray, patch: np.ndarray, points: np.ndarray, normals
 @nb.njit(cache=True)
 def _fitted_curvature(group_patch, group_cell, span, mean_point, unit, area, folded, fitted):
     """bent_cells' fit, group by group: the area-weighted means and second moments of the
-    unfolded groups of the same patch in the 27 cells around (_find), the points' spread C
+    unfolded groups of the same patch in the 27 cells around (_lower_bound), the points' spread C
     and the normals' turn B, J = B C+ over C's two largest eigenvalues (those above 0.05 x
     the largest: a row of cells fits one direction), and J's largest singular value."""
     ng = group_patch.shape[0]
@@ -396,16 +398,18 @@ def _fitted_curvature(group_patch, group_cell, span, mean_point, unit, area, fol
         n0[:] = 0.0
         for dx in range(-1, 2):
             for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    other = _find(group_patch, group_cell, group_patch[g],
-                                  group_cell[g] + (dx * span[1] + dy) * span[2] + dz)
-                    if other >= 0 and not folded[other]:
+                # the dz = -1, 0, 1 cells are consecutive keys: one search, then a scan
+                first = group_cell[g] + (dx * span[1] + dy) * span[2] - 1
+                other = _lower_bound(group_patch, group_cell, group_patch[g], first)
+                while other < ng and group_patch[other] == group_patch[g] and group_cell[other] <= first + 2:
+                    if not folded[other]:
                         around[k] = other
                         k += 1
                         total += area[other]
                         for i in range(3):
                             p0[i] += area[other] * mean_point[other, i]
                             n0[i] += area[other] * unit[other, i]
+                    other += 1
         p0 /= total
         n0 /= total
         spread[:] = 0.0
@@ -466,8 +470,9 @@ def _symmetric_eigen(m):
 
 
 @nb.njit(cache=True)
-def _find(group_patch, group_cell, patch, cell):
-    """Index of (patch, cell) in the lexicographically sorted pairs, or -1."""
+def _lower_bound(group_patch, group_cell, patch, cell):
+    """The first index whose (patch, cell) is not below (patch, cell) in the lexicographically
+    sorted pairs (their number if none)."""
     lo, hi = 0, group_patch.shape[0]
     while lo < hi:
         mid = (lo + hi) // 2
@@ -475,9 +480,7 @@ def _find(group_patch, group_cell, patch, cell):
             lo = mid + 1
         else:
             hi = mid
-    if lo < group_patch.shape[0] and group_patch[lo] == patch and group_cell[lo] == cell:
-        return lo
-    return -1
+    return lo
 
 
 def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -> FeatureAsks:
