@@ -23,25 +23,21 @@ from pathlib import Path
 import paroct
 from paroct.check import mesh_metrics
 from paroct.mesher import estimate_tets
-from paroct.readers import SURFACE_EXTENSIONS
 from paroct.sizing import size_field
-from timing import fastest
+from timing import CORPUS, fastest, surface_files
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("folder", nargs="?", default=str(ROOT.parent / "shared" / "data" / "corpus"))
+    ap.add_argument("folder", nargs="?", default=str(CORPUS))
     ap.add_argument("--divisions", type=float, nargs="+", default=[40])
     ap.add_argument("--curvature", type=float, default=12.0)
     ap.add_argument("--layers", type=float, default=2.0)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
-    models = sorted(p for p in Path(args.folder).iterdir() if p.suffix.lower() in SURFACE_EXTENSIONS)
-    if not models:
-        print(f"no surfaces in {args.folder}", file=sys.stderr)
-        return 2
+    models = surface_files(args.folder)
     options = {"plain": {}, f"curvature {args.curvature:g}": {"curvature": args.curvature},
                f"layers {args.layers:g}": {"layers": args.layers}}
     paroct.mesh(ROOT / "data" / "angle_block.stl", divisions=10, curvature=12, layers=2)  # compile or load the kernels

@@ -18,24 +18,20 @@ from pathlib import Path
 
 import paroct
 from paroct.check import mesh_metrics
-from paroct.readers import SURFACE_EXTENSIONS
-from timing import fastest
+from timing import CORPUS, fastest, surface_files
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("folder", nargs="?", default=str(ROOT.parent / "shared" / "data" / "corpus"))
+    ap.add_argument("folder", nargs="?", default=str(CORPUS))
     ap.add_argument("--divisions", type=float, nargs="+", default=[40, 80])
     ap.add_argument("--feature-angle", type=float, default=None,
                     help="split the surface at this angle (default: named groups, else 40 degrees)")
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
-    models = sorted(p for p in Path(args.folder).iterdir() if p.suffix.lower() in SURFACE_EXTENSIONS)
-    if not models:
-        print(f"no surfaces in {args.folder}", file=sys.stderr)
-        return 2
+    models = surface_files(args.folder)
     paroct.mesh(ROOT / "data" / "angle_block.stl", divisions=10).with_sharp_edges()  # compile or load the kernels
     print(f"{'model':12s} {'div':>4s} {'tets':>9s} {'moved':>11s} {'mesh ms':>8s} {'sharp ms':>8s} "
           f"{'vol err %':>17s} {'hausdorff/diag':>17s} {'min dihedral':>13s} {'max dihedral':>13s}")
