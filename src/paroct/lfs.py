@@ -185,18 +185,53 @@ def _bends(frame: FatFrame, depth: int, centroids: np.ndarray, area: np.ndarray,
 def cells_met(frame: FatFrame, pieces: np.ndarray) -> np.ndarray:
     """The distinct cells (C, 3) int64 of frame's lattice that the bounding boxes (in lattice
     coordinates) of the triangles pieces (P, 3, 3) meet: every cell a piece meets, and a few
-    beside it."""
-    corners = frame.to_lattice(pieces.reshape(-1, 3)).reshape(-1, 3, 3)
-    lo = np.floor(corners.min(axis=1)).astype(np.int64)
-    hi = np.floor(corners.max(axis=1)).astype(np.int64)
-    reach = int((hi - lo).max(initial=0))
-    steps = np.arange(reach + 1)
-    offsets = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    cells = (lo[:, None, :] + offsets[None])[np.all(lo[:, None, :] + offsets[None] <= hi[:, None, :], axis=2)]
-    first = cells.min(axis=0)
-    span = cells.max(axis=0) - first + 1
-    keys = np.unique(_linear(cells, first, span))
-    return np.stack([keys // (span[1] * span[2]), keys // span[2] % span[1], keys % span[2]], axis=1) + first
+    beside it; in order of their coordinates (x slowest)."""
+    if pieces.shape[0] == 0:
+        return np.zeros((0, 3), dtype=np.int64)
+    return _box_cells(np.ascontiguousarray(pieces, dtype=np.float64), np.ascontiguousarray(frame.origin, dtype=np.float64),
+                      1.0 / frame.h, SPACE_TO_LATTICE.astype(np.float64))
+
+
+@nb.njit(cache=True)
+def _box_cells(pieces, origin, scale, matrix):
+    n = pieces.shape[0]
+    lo = np.empty((n, 3), dtype=np.int64)
+    hi = np.empty((n, 3), dtype=np.int64)
+    count = 0
+    for t in range(n):
+        for i in range(3):
+            low, high = np.inf, -np.inf
+            for c in range(3):
+                u = 0.0
+                for k in range(3):
+                    u += matrix[i, k] * (pieces[t, c, k] - origin[k])
+                low, high = min(low, u * scale), max(high, u * scale)
+            lo[t, i], hi[t, i] = np.int64(np.floor(low)), np.int64(np.floor(high))
+        count += (hi[t, 0] - lo[t, 0] + 1) * (hi[t, 1] - lo[t, 1] + 1) * (hi[t, 2] - lo[t, 2] + 1)
+    first = np.empty(3, dtype=np.int64)
+    span = np.empty(3, dtype=np.int64)
+    for i in range(3):
+        first[i] = lo[:, i].min()
+        span[i] = hi[:, i].max() - first[i] + 1
+    keys = np.empty(count, dtype=np.int64)
+    m = 0
+    for t in range(n):
+        for x in range(lo[t, 0], hi[t, 0] + 1):
+            for y in range(lo[t, 1], hi[t, 1] + 1):
+                for z in range(lo[t, 2], hi[t, 2] + 1):
+                    keys[m] = ((x - first[0]) * span[1] + (y - first[1])) * span[2] + (z - first[2])
+                    m += 1
+    keys.sort()
+    out = np.empty((count, 3), dtype=np.int64)
+    u = 0
+    for j in range(count):
+        if j > 0 and keys[j] == keys[j - 1]:
+            continue
+        out[u, 0] = keys[j] // (span[1] * span[2]) + first[0]
+        out[u, 1] = keys[j] // span[2] % span[1] + first[1]
+        out[u, 2] = keys[j] % span[2] + first[2]
+        u += 1
+    return out[:u]
 
 
 _AROUND = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)], dtype=np.int64)
@@ -242,11 +277,6 @@ def _near(cells, marked, ring):
         at = np.searchsorted(table, key - reach)
         out[s] = at < n and table[at] <= key + reach
     return out
-
-
-def _linear(cells: np.ndarray, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
-    """One int64 (N,) per cell (N, 3) of the box from lo spanning span cells an axis."""
-    return ((cells[:, 0] - lo[0]) * span[1] + (cells[:, 1] - lo[1])) * span[2] + (cells[:, 2] - lo[2])
 
 
 def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
