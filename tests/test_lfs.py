@@ -301,3 +301,34 @@ def test_cli_refine_patch(named_box_file, tmp_path, capsys):
     assert "'nowhere' is not one of the surface's 6 named groups" in capsys.readouterr().err
     assert main(["info", str(DATA / "angle_block.stl")]) == 0
     assert "  patch_1: 8 triangles" in capsys.readouterr().out
+
+
+def test_asks_survive_the_passes_after_a_loss():
+    """A 2-thick plate with a rod of radius 0.6 at size 1 loses volume at size (its edges cut
+    by stuffing): the rounds near thin walls and the whole band at size / 2 follow, keeping
+    the asks deeper than that (the rod at 0.25 for 12 elements a turn; patch_1 at 0.5 is met
+    by the halved band).  The mesh keeps the volume within 1 %, the rod's wall stays at its
+    lattice level, and every tet is within the bound."""
+    part = manifold3d.Manifold.cube((10, 10, 2)) + manifold3d.Manifold.cylinder(6, 0.6, 0.6, 48).translate((5, 5, 2))
+    sized = paroct.mesh(part, size=1.0, curvature=12)
+    notes = sized.report.notes
+    assert any(n.startswith("at boundary size 1 the mesh lost") for n in notes)
+    assert any("everywhere" in n for n in notes) and "curves more than 12 elements per turn" in notes[-1]
+    assert abs(sized.report.volume_error) < 0.01
+
+    def rod_edges(result):
+        p, f = result.mesh.points, result.boundary_faces
+        c = p[f].mean(axis=1)
+        n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+        rod = (np.abs(np.hypot(c[:, 0] - 5, c[:, 1] - 5) - 0.6) < 0.05) & (c[:, 2] > 2.5) & (c[:, 2] < 7.5) \
+            & (np.abs(n[:, 2]) < 0.5 * np.linalg.norm(n, axis=1))
+        return np.linalg.norm(p[f[rod]] - p[np.roll(f[rod], 1, axis=1)], axis=2).max(axis=1)
+
+    # Stuffing warps lattice vertices by up to 0.41 of an edge onto the surface, so boundary
+    # edges spread about the lattice's long edge: 0.25 here, 0.5 for the halved band alone.
+    edges, plain = rod_edges(sized), rod_edges(paroct.mesh(part, size=1.0))
+    assert edges.size > 2 * plain.size and np.median(edges) < 0.7 * np.median(plain)
+    assert DIHEDRAL_BOUND[0] <= sized.report.min_dihedral <= sized.report.max_dihedral <= DIHEDRAL_BOUND[1]
+    patched = paroct.mesh(part, size=1.0, patch_sizes={"patch_1": 0.5})
+    assert any("near the" in n and "thin" in n for n in patched.report.notes)
+    assert abs(patched.report.volume_error) < 0.01 and not patched.report.warnings
