@@ -316,15 +316,13 @@ def mesh(
              f"the finest the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer"
              for region in field.regions if region.size < h]
     band, stage_seconds = h, {"load": loaded}  # stage times add up over the attempts
+    t_asks = time.perf_counter()
+    asks, patch_notes = _feature_asks(surface, field, floor)
+    notes.extend(patch_notes)
     if field.curvature is not None or field.layers is not None or field.patch_sizes:
-        t_asks = time.perf_counter()
-        asks, patch_notes = _feature_asks(surface, field, floor)
-        notes.extend(patch_notes)
         stage_seconds["sizing"] = time.perf_counter() - t_asks
         if progress:
             progress("sizing")
-    else:
-        asks = no_asks()
     memory_bound, tried = False, []  # tried: whole-band sizes below h that a pass lost at
     while True:
         report = _pass_report(surface, field, band, stage_seconds)
@@ -386,10 +384,9 @@ def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[Fea
     """Where the size field's curvature, layers and patch sizes (lfs.py) ask for a boundary
     finer than field.size, down to floor (none unless they are given), and notes on patch
     sizes that ask nothing."""
-    asks = no_asks()
-    max_depth = _local_depth(field.size, floor)
     if field.curvature is None and field.layers is None and not field.patch_sizes:
-        return asks, []
+        return no_asks(), []
+    max_depth = _local_depth(field.size, floor)
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     asks, notes = patch_asks(surface, coarse, field.patch_sizes, max_depth)
     if max_depth < 1:
@@ -420,8 +417,8 @@ def _whole_pass(surface: Surface, field: SizeField, band: float, asks: FeatureAs
         sized = _mesh_with_asks(surface, attempt, finer, budget, progress, stage_seconds)
         if isinstance(sized, tuple):
             return sized
-        report.warnings.append(f"curvature, layers or patch sizes not honoured at boundary size {band:.4g}: the boundary was not "
-                               f"refined where {finer.why}: {sized}")
+        report.warnings.append(f"curvature, layers or patch sizes not honoured at boundary size {band:.4g}: the "
+                               f"boundary was not refined where {finer.why}: {sized}")
     return *_mesh_at(surface, attempt, report, progress), report, ""
 
 
@@ -480,8 +477,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
     one level more while the mesh still loses topology or volume.
 
-    base: asks of the size field's own (curvature, layers: lfs.py; depths below field.size)
-    that every round and whole-band pass keeps.
+    base: asks of the size field's own (curvature, layers, patch sizes: lfs.py; depths below
+    field.size) that every round and whole-band pass keeps.
     wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
     Before a round, the coarsest not yet tried is meshed over the whole band when
     estimate_tets puts it below the round's _local_tets (before the first round, only
