@@ -4,25 +4,23 @@ Three asks, each only when the user makes it (SizeField.curvature, .layers, .pat
 
 - **curvature** N: boundary elements of long edge at most 2 pi r / N where the surface bends
   with radius r (N elements per full turn, as Gmsh's Mesh.MeshSizeFromCurvature).  The
-  curvature at a surface vertex is its bending over its area (vertex_curvature): half the
-  sum of theta_e * l_e over its smooth edges (theta_e the angle between the two triangles'
-  normals, l_e the edge's length) over a third of its triangles' area.  Summed over a
-  surface, sum theta_e l_e tends to the integral of |k1| + |k2| (twice the mean curvature's
-  for a convex surface), so the estimate is exact on a cylinder (1 / r) and twice the
-  curvature on a sphere (2 / r): it errs towards smaller elements, by at most a factor 2
-  where both principal curvatures agree.  Edges sharper than the feature angle are edges of
-  the part (sharp.py, boundary.surface_patches), not curvature: they ask for nothing.
+  curvature is measured at the scale of the elements each level would make (curvature_asks,
+  bent_cells): the largest principal curvature of a least-squares normal field over the
+  lattice cells around, per patch, so that scan noise finer than a cell averages out; a
+  level is asked only where the bend shrinks at the next scale, which a crease of the
+  triangulation never does.  Edges sharper than the feature angle, or than one element's
+  turn, are edges of the part (boundary.surface_patches), not curvature.
 - **layers** K: at least K element layers across every wall (material, not gap) thinner than
   K x size: long edge at most t / K for a wall of thickness t, from the thickness samples that
-  the lattice rows measure (features.thin_features).
-
+  the lattice rows measure (features.thin_features; wall_asks).
 - **patch sizes**: a long edge asked on a named patch of the boundary (the input's named
   groups, else patch_1, patch_2, ... of the surface split at the feature angle, as
   MeshResult.boundary_patches names them): the patch's triangles ask the levels below size
   that reach it (patch_asks).
 
-Each gives asks: points (S, 3) in model units and depths (S,) int64, the levels below size
-each point needs (1 or more, at most max_depth).  The mesher turns them into band levels
+Each gives asks (FeatureAsks): points (S, 3) in model units, depths (S,) int64, the levels
+below size each point needs (1 or more, at most max_depth), and the ring of coarse cells
+each point's ask covers.  The mesher turns them into band levels
 (band.band_levels) and refines the band there, measuring and mending the tets where it
 changes level (mesher._refine_rounds).
 """
