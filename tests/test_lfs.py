@@ -332,3 +332,21 @@ def test_asks_survive_the_passes_after_a_loss():
     patched = paroct.mesh(part, size=1.0, patch_sizes={"patch_1": 0.5})
     assert any("near the" in n and "thin" in n for n in patched.report.notes)
     assert abs(patched.report.volume_error) < 0.01 and not patched.report.warnings
+
+
+def test_a_region_below_size_refines_the_boundary_in_it():
+    """A box region asking 0.05 around the x = 1 face of a unit cube meshed at size 0.2: the
+    boundary triangles on that face get two levels finer (median longest edge near 0.05,
+    against 0.2 on the other faces), the interior stays at least size, every tet in the
+    bound, and the note says both."""
+    cube = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    result = paroct.mesh(cube, size=0.2, regions=[paroct.Box((0.8, -0.1, -0.1), (1.1, 1.1, 1.1), 0.05)])
+    p, f = result.mesh.points, result.boundary_faces
+    c = p[f].mean(axis=1)
+    edges = np.linalg.norm(p[f] - p[np.roll(f, 1, axis=1)], axis=2).max(axis=1)
+    face = (np.abs(c[:, 0] - 1) < 1e-6) & np.all((c[:, 1:] > 0.25) & (c[:, 1:] < 0.75), axis=1)
+    far = (np.abs(c[:, 0]) < 1e-6) & np.all((c[:, 1:] > 0.25) & (c[:, 1:] < 0.75), axis=1)
+    assert face.sum() > 4 * far.sum() and np.median(edges[face]) <= 0.05 * 1.2 and np.median(edges[far]) >= 0.15
+    assert DIHEDRAL_BOUND[0] <= result.report.min_dihedral <= result.report.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert any("the boundary in it is refined to 0.05, its interior elements stay at least size" in n
+               for n in result.report.notes)

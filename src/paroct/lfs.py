@@ -17,6 +17,9 @@ Three asks, each only when the user makes it (SizeField.curvature, .layers, .pat
   groups, else patch_1, patch_2, ... of the surface split at the feature angle, as
   MeshResult.boundary_patches names them): the patch's triangles ask the levels below size
   that reach it (patch_asks).
+- **regions** (sizing.Box, sizing.Sphere) asking for less than size: the boundary inside
+  them asks the levels that reach it (region_asks); their interior elements stay at least
+  size, the finest of the interior lattice.
 
 Each gives asks (FeatureAsks): points (S, 3) in model units, depths (S,) int64, the levels
 below size each point needs (1 or more, at most max_depth), and the ring of coarse cells
@@ -563,6 +566,39 @@ def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth:
         points.append(frame.to_space(cells + 0.5))
         depth.append(np.full(cells.shape[0], levels, dtype=np.int64))
         asked.append(f"patch {name!r} asks {size:.4g}")
+    if not points:
+        return no_asks(), notes
+    depth = np.concatenate(depth)
+    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64), " and ".join(asked)), notes
+
+
+def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: int) -> tuple[FeatureAsks, list[str]]:
+    """Asks for the sizes that refinement regions (sizing.Box, sizing.Sphere) below frame.h
+    ask, on the boundary inside them: the triangles cut to frame.h, the pieces with a corner
+    or centroid in the region asking ceil(log2(frame.h / size)) levels (at most max_depth) in
+    the cells of frame's lattice they meet.  Returns the asks and a note per such region."""
+    small = [r for r in regions if r.size < frame.h]
+    if not small:
+        return no_asks(), []
+    pieces, _ = triangle_pieces(surface.vertices[surface.faces], frame.h)
+    probes = np.concatenate([pieces, pieces.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3)
+    points, depth, notes, asked = [], [], [], []
+    for region in small:
+        what = f"a refinement {type(region).__name__.lower()} asks for size {region.size:.4g}, below size = {frame.h:.4g}"
+        inside = (region.distance(probes) <= 0).reshape(-1, 4).any(axis=1)
+        levels = min(int(np.ceil(np.log2(frame.h / region.size) - 1e-9)), max_depth)
+        if max_depth < 1 or not inside.any():
+            notes.append(f"{what}, the finest the interior lattice makes: its elements there are {frame.h:.4g}"
+                         + ("" if max_depth < 1 else "; no boundary lies in it"))
+            continue
+        finest = frame.h / 2**levels
+        notes.append(f"{what}: the boundary in it is refined to {finest:.4g}"
+                     + (" (min_size)" if finest > region.size * (1 + 1e-9) else "")
+                     + f", its interior elements stay at least size = {frame.h:.4g}, the finest the interior lattice makes")
+        cells = cells_met(frame, pieces[inside])
+        points.append(frame.to_space(cells + 0.5))
+        depth.append(np.full(cells.shape[0], levels, dtype=np.int64))
+        asked.append(f"a refinement {type(region).__name__.lower()} asks {region.size:.4g}")
     if not points:
         return no_asks(), notes
     depth = np.concatenate(depth)

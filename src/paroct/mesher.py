@@ -20,7 +20,7 @@ from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
 from .features import ThinFeatures
-from .lfs import FeatureAsks, curvature_asks, merged_asks, no_asks, patch_asks, wall_asks
+from .lfs import FeatureAsks, curvature_asks, merged_asks, no_asks, patch_asks, region_asks, wall_asks
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
@@ -264,8 +264,10 @@ def mesh(
     (default: bounding-box diagonal / divisions, divisions default 40).  max_size: largest
     long edge inside (default 8 * size, rounded down to a power-of-two multiple of size;
     max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
-    a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
-    evaluated at octant corners and centres (both are clamped to at least size).
+    a smaller size inside them (below size, the boundary inside is refined to it, as for
+    patch_sizes, and the interior stays at least size); size_function: h(x) for points (N, 3)
+    returning sizes (N,), evaluated at octant corners and centres (both are clamped to at
+    least size).
     curvature: N elements per full turn of the surface: the boundary refined to long edges of
     at most 2 pi r / N where it bends with radius r (as Gmsh's Mesh.MeshSizeFromCurvature;
     lfs.curvature_asks: measured at the scale of each level, so noise finer than the elements
@@ -312,14 +314,12 @@ def mesh(
     if progress:
         progress("load")
 
-    notes = [f"a refinement {type(region).__name__.lower()} asks for size {region.size:.4g}, below size = {h:.4g}, "
-             f"the finest the lattice makes: its elements there are {h:.4g}; give a smaller size to go finer"
-             for region in field.regions if region.size < h]
+    notes = []
     band, stage_seconds = h, {"load": loaded}  # stage times add up over the attempts
     t_asks = time.perf_counter()
-    asks, patch_notes = _feature_asks(surface, field, floor)
-    notes.extend(patch_notes)
-    if field.curvature is not None or field.layers is not None or field.patch_sizes:
+    asks, ask_notes = _feature_asks(surface, field, floor)
+    notes.extend(ask_notes)
+    if field.curvature is not None or field.layers is not None or field.patch_sizes or ask_notes:
         stage_seconds["sizing"] = time.perf_counter() - t_asks
         if progress:
             progress("sizing")
@@ -381,14 +381,17 @@ def mesh(
 
 
 def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[FeatureAsks, list[str]]:
-    """Where the size field's curvature, layers and patch sizes (lfs.py) ask for a boundary
-    finer than field.size, down to floor (none unless they are given), and notes on patch
-    sizes that ask nothing."""
-    if field.curvature is None and field.layers is None and not field.patch_sizes:
+    """Where the size field's curvature, layers, patch sizes and regions below field.size
+    (lfs.py) ask for a boundary finer than field.size, down to floor (none unless they are
+    given), and notes on patch sizes and regions."""
+    below = any(region.size < field.size for region in field.regions)
+    if field.curvature is None and field.layers is None and not field.patch_sizes and not below:
         return no_asks(), []
     max_depth = _local_depth(field.size, floor)
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
-    asks, notes = patch_asks(surface, coarse, field.patch_sizes, max_depth)
+    asks, notes = region_asks(surface, coarse, field.regions, max_depth)
+    patched, patch_notes = patch_asks(surface, coarse, field.patch_sizes, max_depth)
+    asks, notes = merged_asks(asks, patched), notes + patch_notes
     if max_depth < 1:
         return no_asks(), notes
     if field.curvature is not None:
