@@ -350,3 +350,25 @@ def test_a_region_below_size_refines_the_boundary_in_it():
     assert DIHEDRAL_BOUND[0] <= result.report.min_dihedral <= result.report.max_dihedral <= DIHEDRAL_BOUND[1]
     assert any("the boundary in it is refined to 0.05, its interior elements stay at least size" in n
                for n in result.report.notes)
+
+
+def test_a_size_function_below_size_refines_the_boundary():
+    """h(x) = 0.05 near the x = 1 face of a unit cube at size 0.2, 1 elsewhere: that face's
+    boundary triangles two levels finer, the others at size, within the bound, with a note;
+    a function that fails on the surface's points is refused in one line."""
+    cube = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    result = paroct.mesh(cube, size=0.2, size_function=lambda x: np.where(x[:, 0] > 0.8, 0.05, 1.0))
+    p, f = result.mesh.points, result.boundary_faces
+    c = p[f].mean(axis=1)
+    edges = np.linalg.norm(p[f] - p[np.roll(f, 1, axis=1)], axis=2).max(axis=1)
+    middle = np.all((c[:, 1:] > 0.25) & (c[:, 1:] < 0.75), axis=1)
+    face, far = middle & (np.abs(c[:, 0] - 1) < 1e-6), middle & (np.abs(c[:, 0]) < 1e-6)
+    assert np.median(edges[face]) <= 0.05 * 1.2 and np.median(edges[far]) >= 0.15
+    assert DIHEDRAL_BOUND[0] <= result.report.min_dihedral <= result.report.max_dihedral <= DIHEDRAL_BOUND[1]
+    assert any("size_function asks down to 0.05 on the boundary" in n for n in result.report.notes)
+
+    def failing(points):
+        raise ValueError("boom")
+
+    with pytest.raises(ParoctError, match="size_function failed on [0-9]+ points of the surface: boom"):
+        paroct.mesh(cube, size=0.2, size_function=failing)

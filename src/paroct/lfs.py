@@ -17,9 +17,9 @@ Three asks, each only when the user makes it (SizeField.curvature, .layers, .pat
   groups, else patch_1, patch_2, ... of the surface split at the feature angle, as
   MeshResult.boundary_patches names them): the patch's triangles ask the levels below size
   that reach it (patch_asks).
-- **regions** (sizing.Box, sizing.Sphere) asking for less than size: the boundary inside
-  them asks the levels that reach it (region_asks); their interior elements stay at least
-  size, the finest of the interior lattice.
+- **regions** (sizing.Box, sizing.Sphere) and a **size function** asking for less than
+  size: the boundary there asks the levels that reach it (region_asks, function_asks); the
+  interior stays at least size, the finest of the interior lattice.
 
 Each gives asks (FeatureAsks): points (S, 3) in model units, depths (S,) int64, the levels
 below size each point needs (1 or more, at most max_depth), and the ring of coarse cells
@@ -603,3 +603,37 @@ def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: in
         return no_asks(), notes
     depth = np.concatenate(depth)
     return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64), " and ".join(asked)), notes
+
+
+def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int) -> tuple[FeatureAsks, list[str]]:
+    """Asks for the sizes a size function h(x) (points (N, 3) -> sizes (N,)) gives below
+    frame.h on the boundary: the triangles cut to frame.h, each piece asking ceil(log2(frame.h
+    / h)) levels (at most max_depth) for the smallest h at its corners and centroid, in the
+    cells of frame's lattice it meets.  Returns the asks and a note if any.  ParoctError if
+    the function fails or returns other than positive sizes, one per point."""
+    if function is None or max_depth < 1:
+        return no_asks(), []
+    pieces, _ = triangle_pieces(surface.vertices[surface.faces], frame.h)
+    probes = np.concatenate([pieces, pieces.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3)
+    try:
+        values = np.asarray(function(probes), dtype=np.float64)
+    except Exception as exc:  # the user's function failed: say so in one line
+        raise ParoctError(f"size_function failed on {probes.shape[0]} points of the surface: {exc}") from None
+    if values.shape != (probes.shape[0],) or not np.all(values > 0):
+        raise ParoctError(f"size_function returned shape {values.shape} for {probes.shape[0]} points of the surface, "
+                          "or a non-positive or NaN size; expected positive sizes, one per point")
+    wanted = values.reshape(-1, 4).min(axis=1)
+    levels = np.minimum(np.ceil(np.log2(frame.h / wanted) - 1e-9), max_depth).astype(np.int64)
+    points, depth = [], []
+    for level in np.unique(levels[levels > 0]).tolist():
+        cells = cells_met(frame, pieces[levels == level])
+        points.append(frame.to_space(cells + 0.5))
+        depth.append(np.full(cells.shape[0], level, dtype=np.int64))
+    if not points:
+        return no_asks(), []
+    depth = np.concatenate(depth)
+    smallest = float(wanted.min())
+    note = (f"size_function asks down to {smallest:.4g} on the boundary, below size = {frame.h:.4g}: the boundary there "
+            f"is refined to {frame.h / 2**int(depth.max()):.4g} at most, the interior stays at least size")
+    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64),
+                       "size_function asks"), [note]

@@ -20,7 +20,8 @@ from .check import far_from_points, long_triangle_centres
 from .errors import ParoctError
 from .intersections import crossing_triangles
 from .features import ThinFeatures
-from .lfs import FeatureAsks, curvature_asks, merged_asks, no_asks, patch_asks, region_asks, wall_asks
+from .lfs import (FeatureAsks, curvature_asks, function_asks, merged_asks, no_asks, patch_asks, region_asks,
+                  wall_asks)
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
@@ -264,10 +265,9 @@ def mesh(
     (default: bounding-box diagonal / divisions, divisions default 40).  max_size: largest
     long edge inside (default 8 * size, rounded down to a power-of-two multiple of size;
     max_size = size gives a uniform lattice).  regions: paroct.Box / paroct.Sphere asking for
-    a smaller size inside them (below size, the boundary inside is refined to it, as for
-    patch_sizes, and the interior stays at least size); size_function: h(x) for points (N, 3)
-    returning sizes (N,), evaluated at octant corners and centres (both are clamped to at
-    least size).
+    a smaller size inside them; size_function: h(x) for points (N, 3) returning sizes (N,),
+    evaluated at octant corners and centres.  Both are clamped to at least size inside; on
+    the boundary, a size below size refines it there, as patch_sizes do.
     curvature: N elements per full turn of the surface: the boundary refined to long edges of
     at most 2 pi r / N where it bends with radius r (as Gmsh's Mesh.MeshSizeFromCurvature;
     lfs.curvature_asks: measured at the scale of each level, so noise finer than the elements
@@ -381,17 +381,20 @@ def mesh(
 
 
 def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[FeatureAsks, list[str]]:
-    """Where the size field's curvature, layers, patch sizes and regions below field.size
-    (lfs.py) ask for a boundary finer than field.size, down to floor (none unless they are
-    given), and notes on patch sizes and regions."""
+    """Where the size field's curvature, layers, patch sizes, and regions and size function
+    below field.size (lfs.py) ask for a boundary finer than field.size, down to floor (none
+    unless they are given), and notes on patch sizes, regions and the function."""
     below = any(region.size < field.size for region in field.regions)
-    if field.curvature is None and field.layers is None and not field.patch_sizes and not below:
+    if (field.curvature is None and field.layers is None and not field.patch_sizes and not below
+            and field.function is None):
         return no_asks(), []
     max_depth = _local_depth(field.size, floor)
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
-    asks, notes = region_asks(surface, coarse, field.regions, max_depth)
-    patched, patch_notes = patch_asks(surface, coarse, field.patch_sizes, max_depth)
-    asks, notes = merged_asks(asks, patched), notes + patch_notes
+    asks, notes = no_asks(), []
+    for found, found_notes in (region_asks(surface, coarse, field.regions, max_depth),
+                               function_asks(surface, coarse, field.function, max_depth),
+                               patch_asks(surface, coarse, field.patch_sizes, max_depth)):
+        asks, notes = merged_asks(asks, found), notes + found_notes
     if max_depth < 1:
         return no_asks(), notes
     if field.curvature is not None:
