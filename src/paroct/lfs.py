@@ -77,6 +77,16 @@ def merged_asks(a: FeatureAsks, b: FeatureAsks) -> FeatureAsks:
                        np.concatenate([a.ring, b.ring]), why)
 
 
+def pieces_asks(frame: FatFrame, asked: list[tuple[np.ndarray, int]], why: str) -> FeatureAsks:
+    """Asks for ``level`` levels in the cells of frame's lattice that each set of triangle
+    pieces (P, 3, 3) meets (cells_met; ring 0), for the (pieces, level) pairs of asked."""
+    if not asked:
+        return no_asks()
+    cells = [cells_met(frame, pieces) for pieces, _ in asked]
+    depth = np.concatenate([np.full(c.shape[0], level, dtype=np.int64) for c, (_, level) in zip(cells, asked)])
+    return FeatureAsks(frame.to_space(np.concatenate(cells) + 0.5), depth, np.zeros(depth.size, dtype=np.int64), why)
+
+
 #: A bend measured at one scale is resolved by finer elements only if it shrinks when measured
 #: at half the scale (a fillet's bend per cell halves; a crease's, one edge of the
 #: triangulation, stays): the finer cells' bend must be below this fraction of the coarser's.
@@ -108,7 +118,7 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
     pieces, owner = triangle_pieces(vertices[faces], frame.h)
     centres, bend, group = _bends(frame, 0, *_piece_measures(frame, 0, pieces), patches[owner], normals[owner])
     too_bent = bend > limit
-    points, depth, smallest = [], [], np.inf
+    asked_pieces, smallest = [], np.inf
     for d in range(max_depth):
         if not too_bent.any():
             break
@@ -134,19 +144,14 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
             finite = asked & np.isfinite(bend)
             if finite.any():
                 smallest = min(smallest, frame.h / 2**d / bend[finite].max())
-            cells = cells_met(frame, level_pieces[asked[group]])
-            points.append(frame.to_space(cells + 0.5))
-            depth.append(np.full(cells.shape[0], d + 1, dtype=np.int64))
+            asked_pieces.append((level_pieces[asked[group]], d + 1))
         from_asked = np.zeros(finer_bend.shape[0], dtype=bool)
         from_asked[finer_group[asked[parent]]] = True
         centres, bend, group, too_bent = finer_centres, finer_bend, finer_group, (finer_bend > limit) & from_asked
-    if not points:
-        return no_asks()
-    depth = np.concatenate(depth)
-    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64),
-                       f"the surface curves more than {per_turn:g} elements per turn allow ("
+    deepest = max((level for _, level in asked_pieces), default=0)
+    return pieces_asks(frame, asked_pieces, f"the surface curves more than {per_turn:g} elements per turn allow ("
                        + (f"smallest radius about {smallest:.4g}, " if np.isfinite(smallest) else "")
-                       + f"up to {int(depth.max())} level{'s' * int(depth.max() > 1)} finer)")
+                       + f"up to {deepest} level{'s' * int(deepest > 1)} finer)")
 
 
 def _piece_measures(frame: FatFrame, depth: int, pieces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -547,7 +552,7 @@ def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth:
     labels, names, _ = surface_labels(surface, None)
     known = list(names) if names else [f"patch_{k}" for k in range(1, int(labels.max(initial=0)) + 1)]
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    points, depth, notes, asked = [], [], [], []
+    pieces, notes, asked = [], [], []
     for name, size in patch_sizes:
         if name not in known:
             shown = ", ".join(repr(n) for n in known[:20]) + (f" and {len(known) - 20} more" if len(known) > 20 else "")
@@ -562,14 +567,9 @@ def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth:
             notes.append(f"patch {name!r} asks size {size:.4g}, below min_size: its elements are "
                          f"{frame.h / 2**max_depth:.4g}")
             levels = max_depth
-        cells = cells_met(frame, triangle_pieces(surface.vertices[faces[labels == known.index(name) + 1]], frame.h)[0])
-        points.append(frame.to_space(cells + 0.5))
-        depth.append(np.full(cells.shape[0], levels, dtype=np.int64))
+        pieces.append((triangle_pieces(surface.vertices[faces[labels == known.index(name) + 1]], frame.h)[0], levels))
         asked.append(f"patch {name!r} asks {size:.4g}")
-    if not points:
-        return no_asks(), notes
-    depth = np.concatenate(depth)
-    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64), " and ".join(asked)), notes
+    return pieces_asks(frame, pieces, " and ".join(asked)), notes
 
 
 def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: int) -> tuple[FeatureAsks, list[str]]:
@@ -582,7 +582,7 @@ def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: in
         return no_asks(), []
     pieces, _ = triangle_pieces(surface.vertices[surface.faces], frame.h)
     probes = np.concatenate([pieces, pieces.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3)
-    points, depth, notes, asked = [], [], [], []
+    inside_pieces, notes, asked = [], [], []
     for region in small:
         what = f"a refinement {type(region).__name__.lower()} asks for size {region.size:.4g}, below size = {frame.h:.4g}"
         inside = (region.distance(probes) <= 0).reshape(-1, 4).any(axis=1)
@@ -595,14 +595,9 @@ def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: in
         notes.append(f"{what}: the boundary in it is refined to {finest:.4g}"
                      + (" (min_size)" if finest > region.size * (1 + 1e-9) else "")
                      + f", its interior elements stay at least size = {frame.h:.4g}, the finest the interior lattice makes")
-        cells = cells_met(frame, pieces[inside])
-        points.append(frame.to_space(cells + 0.5))
-        depth.append(np.full(cells.shape[0], levels, dtype=np.int64))
+        inside_pieces.append((pieces[inside], levels))
         asked.append(f"a refinement {type(region).__name__.lower()} asks {region.size:.4g}")
-    if not points:
-        return no_asks(), notes
-    depth = np.concatenate(depth)
-    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64), " and ".join(asked)), notes
+    return pieces_asks(frame, inside_pieces, " and ".join(asked)), notes
 
 
 def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int) -> tuple[FeatureAsks, list[str]]:
@@ -624,16 +619,9 @@ def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int) -
                           "or a non-positive or NaN size; expected positive sizes, one per point")
     wanted = values.reshape(-1, 4).min(axis=1)
     levels = np.minimum(np.ceil(np.log2(frame.h / wanted) - 1e-9), max_depth).astype(np.int64)
-    points, depth = [], []
-    for level in np.unique(levels[levels > 0]).tolist():
-        cells = cells_met(frame, pieces[levels == level])
-        points.append(frame.to_space(cells + 0.5))
-        depth.append(np.full(cells.shape[0], level, dtype=np.int64))
-    if not points:
+    asked = [(pieces[levels == level], level) for level in np.unique(levels[levels > 0]).tolist()]
+    if not asked:
         return no_asks(), []
-    depth = np.concatenate(depth)
-    smallest = float(wanted.min())
-    note = (f"size_function asks down to {smallest:.4g} on the boundary, below size = {frame.h:.4g}: the boundary there "
-            f"is refined to {frame.h / 2**int(depth.max()):.4g} at most, the interior stays at least size")
-    return FeatureAsks(np.concatenate(points), depth, np.zeros(depth.size, dtype=np.int64),
-                       "size_function asks"), [note]
+    note = (f"size_function asks down to {float(wanted.min()):.4g} on the boundary, below size = {frame.h:.4g}: the "
+            f"boundary there is refined to {frame.h / 2**asked[-1][1]:.4g} at most, the interior stays at least size")
+    return pieces_asks(frame, asked, "size_function asks"), [note]
