@@ -301,6 +301,9 @@ def test_cli_refine_patch(named_box_file, tmp_path, capsys):
     assert "'nowhere' is not one of the surface's 6 named groups" in capsys.readouterr().err
     assert main(["info", str(DATA / "angle_block.stl")]) == 0
     assert "  patch_1: 8 triangles" in capsys.readouterr().out
+    assert main(["info", str(named_box_file), "--size", "0.1", "--refine-patch", "top", "0.03"]) == 0
+    assert "--refine-patch top 0.03: the boundary refined to 0.025 at most where patch 'top' asks 0.03" in \
+        capsys.readouterr().out
 
 
 def test_asks_survive_the_passes_after_a_loss():

@@ -143,6 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "the tets it would take at most")
     i.add_argument("--layers", type=float, metavar="K", help="also say where mesh --layers K would refine, and the "
                    "tets it would take at most")
+    i.add_argument("--refine-patch", nargs=2, action="append", default=[], metavar=("NAME", "H"),
+                   help="also say what mesh --refine-patch NAME H would refine (repeatable)")
     i.add_argument("--min-size", type=float, metavar="H", help="as for mesh (default size / 16)")
     i.set_defaults(run=_run_info)
 
@@ -193,12 +195,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     for name, value in (("--curvature", args.curvature), ("--layers", args.layers)):
         if value is not None:
             positive_number(name, value)
-    patch_sizes = []
-    for name, text in args.refine_patch:
-        try:
-            patch_sizes.append((name, positive_number(f"--refine-patch {name}", float(text))))
-        except ValueError:
-            raise ParoctError(f"--refine-patch {name} {text}: the size must be a number") from None
+    patch_sizes = _patch_sizes(args.refine_patch)
     if not out.parent.is_dir():
         raise ParoctError(f"{out}: folder {out.parent} does not exist")
     max_memory = None
@@ -301,6 +298,20 @@ def _kernels_cached() -> bool:
     return folder.is_dir() and any(folder.rglob("stuffing*.nbi"))
 
 
+def _patch_sizes(refine_patch: list) -> list[tuple[str, float]]:
+    """The (name, size) pairs of --refine-patch NAME H options; ParoctError for a size that is
+    not a positive number."""
+    from .sizing import positive_number
+
+    pairs = []
+    for name, text in refine_patch:
+        try:
+            pairs.append((name, positive_number(f"--refine-patch {name}", float(text))))
+        except ValueError:
+            raise ParoctError(f"--refine-patch {name} {text}: the size must be a number") from None
+    return pairs
+
+
 def _run_info(args: argparse.Namespace) -> int:
     from .boundary import surface_patches
     from .mesher import BYTES_PER_TET, estimate_tets, resolve_size
@@ -311,6 +322,7 @@ def _run_info(args: argparse.Namespace) -> int:
     for name, value in (("--curvature", args.curvature), ("--layers", args.layers), ("--min-size", args.min_size)):
         if value is not None:
             positive_number(name, value)
+    patch_sizes = _patch_sizes(args.refine_patch)
     surface = load_surface(args.surface)
     size = resolve_size(surface, args.size, args.divisions)
     lo, hi = surface.bbox_min, surface.bbox_max
@@ -339,32 +351,35 @@ def _run_info(args: argparse.Namespace) -> int:
     lines.append(f"size {size:.6g} (diagonal / {surface.diagonal / size:.4g}): one pass at this size makes at most "
                  f"about {tets:.3g} tets in {tets * BYTES_PER_TET / 2**30:.3g} GiB (graded, max_size 8 x size)")
     lines.append(_thin_places(surface, size))
-    if args.curvature is not None or args.layers is not None:
-        lines.append(_feature_sizing(surface, size, args.curvature, args.layers, args.min_size))
+    if args.curvature is not None or args.layers is not None or patch_sizes:
+        lines.append(_feature_sizing(surface, size, args, patch_sizes))
     print("\n".join(lines))
     return EXIT_OK
 
 
-def _feature_sizing(surface, size: float, curvature: float | None, layers: float | None, min_size: float | None) -> str:
-    """Where mesh's curvature and layers would refine the boundary, and the tets a pass with
-    them would make at most (mesher._local_tets: about 3-7 x a first pass near thin walls)."""
+def _feature_sizing(surface, size: float, args: argparse.Namespace, patch_sizes: list) -> str:
+    """Where mesh's --curvature, --layers and --refine-patch (args, patch_sizes) would refine
+    the boundary, and the tets a pass with them would make at most (mesher._local_tets: about
+    3-7 x a first pass near thin walls)."""
     from .frame import fat_frame
     from .mesher import BYTES_PER_TET, DEFAULT_MIN_SIZE_DIVISOR, _asked_levels, _feature_asks, _local_tets
     from .sizing import size_field
 
-    field = size_field(size, curvature=curvature, layers=layers)
-    floor = size / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else min(min_size, size)
-    asks, _ = _feature_asks(surface, field, floor)
-    options = " ".join(f"--{name} {value:g}" for name, value in (("curvature", curvature), ("layers", layers))
-                       if value is not None)
+    field = size_field(size, curvature=args.curvature, layers=args.layers, patch_sizes=patch_sizes)
+    floor = size / DEFAULT_MIN_SIZE_DIVISOR if args.min_size is None else min(args.min_size, size)
+    asks, notes = _feature_asks(surface, field, floor)
+    options = " ".join([f"--{name} {value:g}" for name, value in (("curvature", args.curvature),
+                                                                   ("layers", args.layers)) if value is not None]
+                       + [f"--refine-patch {name} {value:g}" for name, value in patch_sizes])
+    said = "".join(f"\n  {note}" for note in notes)
     if asks.empty:
-        return f"{options}: nothing finer than size asked"
+        return f"{options}: nothing finer than size asked{said}"
     deepest = int(asks.depth.max())
     wanted = _asked_levels(fat_frame(surface.bbox_min, surface.bbox_max, size), deepest, asks)
     tets = _local_tets(surface, field, wanted)
     return (f"{options}: the boundary refined to {size / 2**deepest:.4g} at most where {asks.why}, in "
             f"{wanted.keys.size} cells of size; one pass makes at most about {tets:.3g} tets in "
-            f"{tets * BYTES_PER_TET / 2**30:.3g} GiB")
+            f"{tets * BYTES_PER_TET / 2**30:.3g} GiB{said}")
 
 
 def _patch_lines(surface, labels: np.ndarray) -> list[str]:
