@@ -182,7 +182,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from .io import output_format, write_mesh
     from .memory import peak_resident, start_peak_count
     from .mesher import mesh, resolve_size
-    from .sizing import Box, Sphere, positive_number
+    from .sizing import Box, Sphere
     from .surface import load_surface
 
     source = Path(args.surface)
@@ -192,10 +192,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     for angle in (args.patches, args.sharp_edges):
         if angle is not None and angle is not _INPUT_GROUPS:
             checked_feature_angle(angle)
-    for name, value in (("--curvature", args.curvature), ("--layers", args.layers)):
-        if value is not None:
-            positive_number(name, value)
-    patch_sizes = _patch_sizes(args.refine_patch)
+    patch_sizes = _sizing_options(args)
     if not out.parent.is_dir():
         raise ParoctError(f"{out}: folder {out.parent} does not exist")
     max_memory = None
@@ -298,13 +295,17 @@ def _kernels_cached() -> bool:
     return folder.is_dir() and any(folder.rglob("stuffing*.nbi"))
 
 
-def _patch_sizes(refine_patch: list) -> list[tuple[str, float]]:
-    """The (name, size) pairs of --refine-patch NAME H options; ParoctError for a size that is
-    not a positive number."""
+def _sizing_options(args: argparse.Namespace) -> list[tuple[str, float]]:
+    """Check --curvature and --layers (mesh and info share them) before any work, and return
+    the (name, size) pairs of the --refine-patch NAME H options; ParoctError for a value that
+    is not a positive number."""
     from .sizing import positive_number
 
+    for name, value in (("--curvature", args.curvature), ("--layers", args.layers)):
+        if value is not None:
+            positive_number(name, value)
     pairs = []
-    for name, text in refine_patch:
+    for name, text in args.refine_patch:
         try:
             pairs.append((name, positive_number(f"--refine-patch {name}", float(text))))
         except ValueError:
@@ -319,10 +320,9 @@ def _run_info(args: argparse.Namespace) -> int:
     from .sizing import positive_number, size_field
     from .surface import load_surface
 
-    for name, value in (("--curvature", args.curvature), ("--layers", args.layers), ("--min-size", args.min_size)):
-        if value is not None:
-            positive_number(name, value)
-    patch_sizes = _patch_sizes(args.refine_patch)
+    patch_sizes = _sizing_options(args)
+    if args.min_size is not None:
+        positive_number("--min-size", args.min_size)
     surface = load_surface(args.surface)
     size = resolve_size(surface, args.size, args.divisions)
     lo, hi = surface.bbox_min, surface.bbox_max

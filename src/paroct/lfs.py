@@ -87,14 +87,31 @@ def pieces_asks(frame: FatFrame, asked: list[tuple[np.ndarray, int]], why: str) 
     return FeatureAsks(frame.to_space(np.concatenate(cells) + 0.5), depth, np.zeros(depth.size, dtype=np.int64), why)
 
 
+@dataclass(frozen=True)
+class SurfacePieces:
+    """The surface's triangles cut to a frame's size (triangle_pieces), shared by the asks:
+    corners (P, 3, 3), the triangle (P,) of each piece, and probes (P * 4, 3), each piece's
+    corners and centroid, where regions and size functions are read."""
+
+    corners: np.ndarray
+    owner: np.ndarray
+    probes: np.ndarray
+
+
+def surface_pieces(surface: Surface, frame: FatFrame) -> SurfacePieces:
+    """The surface's triangles cut to pieces no longer than frame.h."""
+    corners, owner = triangle_pieces(np.asarray(surface.vertices, dtype=np.float64)[surface.faces], frame.h)
+    return SurfacePieces(corners, owner, np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3))
+
+
 #: A bend measured at one scale is resolved by finer elements only if it shrinks when measured
 #: at half the scale (a fillet's bend per cell halves; a crease's, one edge of the
 #: triangulation, stays): the finer cells' bend must be below this fraction of the coarser's.
 SHRINKS = 0.75
 
 
-def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth: int,
-                   feature_angle: float) -> FeatureAsks:
+def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth: int, feature_angle: float,
+                   cut: SurfacePieces | None = None) -> FeatureAsks:
     """Asks for long edges of at most 2 pi r / per_turn where the surface bends with radius
     r, measured at the scale of the elements each level would make (bent_cells), coarse to
     fine.  The triangles are split into pieces of edge at most frame.h and binned by
@@ -107,7 +124,8 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
     again, down to max_depth.  A bend that does not shrink is a crease of the triangulation,
     which no element size resolves.  Each patch of the surface split at feature_angle, or at
     360 / per_turn degrees if smaller (boundary.surface_patches), is measured apart: an edge
-    turning more than one element may is an edge of the part, not curvature."""
+    turning more than one element may is an edge of the part, not curvature.  cut: the surface
+    cut to frame.h (surface_pieces), if it already is."""
     if max_depth < 1:
         return no_asks()
     vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
@@ -115,7 +133,8 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
     normals = face_normals(vertices, faces)
     patches = surface_patches(surface, min(feature_angle, 360 / per_turn))
     limit = 2 * np.pi / per_turn
-    pieces, owner = triangle_pieces(vertices[faces], frame.h)
+    cut = surface_pieces(surface, frame) if cut is None else cut
+    pieces, owner = cut.corners, cut.owner
     centres, bend, group = _bends(frame, 0, *_piece_measures(frame, 0, pieces), patches[owner], normals[owner])
     too_bent = bend > limit
     asked_pieces, smallest = [], np.inf
@@ -238,9 +257,6 @@ def _box_cells(pieces, origin, scale, matrix):
         out[u, 2] = keys[j] % span[2] + first[2]
         u += 1
     return out[:u]
-
-
-_AROUND = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)], dtype=np.int64)
 
 
 def _near_cells(cells: np.ndarray, marked: np.ndarray, ring: bool = True) -> np.ndarray:
@@ -539,24 +555,27 @@ def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -
                        f"(thinnest {walls.thickness[thin].min():.4g})")
 
 
-def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth: int) -> tuple[FeatureAsks, list[str]]:
+def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth: int,
+               cut: SurfacePieces | None = None) -> tuple[FeatureAsks, list[str]]:
     """Asks for the long edges patch_sizes ((name, size), ...) asks on named patches of the
     boundary: the input's named groups if it has them, else the surface split at the default
     feature angle, named patch_1, patch_2, ... (boundary.surface_labels).  Each patch's
     triangles, cut to frame.h, ask ceil(log2(frame.h / size)) levels (at most max_depth) in
     the cells of frame's lattice they meet.  Returns the asks and notes on sizes not met (at
     least size: the boundary is nowhere coarser; below the floor max_depth allows).
-    ParoctError for a name the surface does not have, listing those it has."""
+    ParoctError for a name the surface does not have, listing those it has.  cut: as for
+    curvature_asks."""
     if not patch_sizes:
         return no_asks(), []
-    labels, names, _ = surface_labels(surface, None)
+    labels, names, angle = surface_labels(surface, None)
     known = list(names) if names else [f"patch_{k}" for k in range(1, int(labels.max(initial=0)) + 1)]
-    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    cut = surface_pieces(surface, frame) if cut is None else cut
+    piece_labels = labels[cut.owner]
     pieces, notes, asked = [], [], []
     for name, size in patch_sizes:
         if name not in known:
             shown = ", ".join(repr(n) for n in known[:20]) + (f" and {len(known) - 20} more" if len(known) > 20 else "")
-            what = "named groups" if names else "patches (no named groups: the surface split at the feature angle)"
+            what = "named groups" if names else f"patches (no named groups: the surface split at {angle:g} degrees)"
             raise ParoctError(f"patch {name!r} is not one of the surface's {len(known)} {what}: {shown}")
         levels = int(np.ceil(np.log2(frame.h / size) - 1e-9))
         if levels < 1:
@@ -567,21 +586,23 @@ def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth:
             notes.append(f"patch {name!r} asks size {size:.4g}, below min_size: its elements are "
                          f"{frame.h / 2**max_depth:.4g}")
             levels = max_depth
-        pieces.append((triangle_pieces(surface.vertices[faces[labels == known.index(name) + 1]], frame.h)[0], levels))
+        pieces.append((cut.corners[piece_labels == known.index(name) + 1], levels))
         asked.append(f"patch {name!r} asks {size:.4g}")
     return pieces_asks(frame, pieces, " and ".join(asked)), notes
 
 
-def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: int) -> tuple[FeatureAsks, list[str]]:
+def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: int,
+                cut: SurfacePieces | None = None) -> tuple[FeatureAsks, list[str]]:
     """Asks for the sizes that refinement regions (sizing.Box, sizing.Sphere) below frame.h
     ask, on the boundary inside them: the triangles cut to frame.h, the pieces with a corner
     or centroid in the region asking ceil(log2(frame.h / size)) levels (at most max_depth) in
-    the cells of frame's lattice they meet.  Returns the asks and a note per such region."""
+    the cells of frame's lattice they meet.  Returns the asks and a note per such region.
+    cut: as for curvature_asks."""
     small = [r for r in regions if r.size < frame.h]
     if not small:
         return no_asks(), []
-    pieces, _ = triangle_pieces(surface.vertices[surface.faces], frame.h)
-    probes = np.concatenate([pieces, pieces.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3)
+    cut = surface_pieces(surface, frame) if cut is None else cut
+    pieces, probes = cut.corners, cut.probes
     inside_pieces, notes, asked = [], [], []
     for region in small:
         what = f"a refinement {type(region).__name__.lower()} asks for size {region.size:.4g}, below size = {frame.h:.4g}"
@@ -600,16 +621,18 @@ def region_asks(surface: Surface, frame: FatFrame, regions: tuple, max_depth: in
     return pieces_asks(frame, inside_pieces, " and ".join(asked)), notes
 
 
-def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int) -> tuple[FeatureAsks, list[str]]:
+def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int,
+                  cut: SurfacePieces | None = None) -> tuple[FeatureAsks, list[str]]:
     """Asks for the sizes a size function h(x) (points (N, 3) -> sizes (N,)) gives below
     frame.h on the boundary: the triangles cut to frame.h, each piece asking ceil(log2(frame.h
     / h)) levels (at most max_depth) for the smallest h at its corners and centroid, in the
     cells of frame's lattice it meets.  Returns the asks and a note if any.  ParoctError if
-    the function fails or returns other than positive sizes, one per point."""
+    the function fails or returns other than positive sizes, one per point.  cut: as for
+    curvature_asks."""
     if function is None or max_depth < 1:
         return no_asks(), []
-    pieces, _ = triangle_pieces(surface.vertices[surface.faces], frame.h)
-    probes = np.concatenate([pieces, pieces.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3)
+    cut = surface_pieces(surface, frame) if cut is None else cut
+    pieces, probes = cut.corners, cut.probes
     try:
         values = np.asarray(function(probes), dtype=np.float64)
     except Exception as exc:  # the user's function failed: say so in one line

@@ -21,7 +21,7 @@ from .errors import ParoctError
 from .intersections import crossing_triangles
 from .features import ThinFeatures
 from .lfs import (FeatureAsks, curvature_asks, function_asks, merged_asks, no_asks, patch_asks, region_asks,
-                  wall_asks)
+                  surface_pieces, wall_asks)
 from .features import thin_features as find_thin_features
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, LATTICE_TO_SPACE, X_AXIS_DIRECTION, FatFrame, fat_frame, space_point
 from .band import (BandLevels, FineSurfaceCells, band_cells, band_levels, kept_leaves, local_leaves, merge_band_levels,
@@ -319,7 +319,7 @@ def mesh(
     t_asks = time.perf_counter()
     asks, ask_notes = _feature_asks(surface, field, floor)
     notes.extend(ask_notes)
-    if field.curvature is not None or field.layers is not None or field.patch_sizes or ask_notes:
+    if field.asks_boundary:
         stage_seconds["sizing"] = time.perf_counter() - t_asks
         if progress:
             progress("sizing")
@@ -384,21 +384,24 @@ def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[Fea
     """Where the size field's curvature, layers, patch sizes, and regions and size function
     below field.size (lfs.py) ask for a boundary finer than field.size, down to floor (none
     unless they are given), and notes on patch sizes, regions and the function."""
-    below = any(region.size < field.size for region in field.regions)
-    if (field.curvature is None and field.layers is None and not field.patch_sizes and not below
-            and field.function is None):
+    if not field.asks_boundary:
         return no_asks(), []
     max_depth = _local_depth(field.size, floor)
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
+    # One cut of the surface serves every ask that reads it (layers read the lattice rows).
+    only_layers = field.curvature is None and not field.patch_sizes and field.function is None \
+        and all(region.size >= field.size for region in field.regions)
+    cut = None if only_layers else surface_pieces(surface, coarse)
     asks, notes = no_asks(), []
-    for found, found_notes in (region_asks(surface, coarse, field.regions, max_depth),
-                               function_asks(surface, coarse, field.function, max_depth),
-                               patch_asks(surface, coarse, field.patch_sizes, max_depth)):
+    for found, found_notes in (region_asks(surface, coarse, field.regions, max_depth, cut),
+                               function_asks(surface, coarse, field.function, max_depth, cut),
+                               patch_asks(surface, coarse, field.patch_sizes, max_depth, cut)):
         asks, notes = merged_asks(asks, found), notes + found_notes
     if max_depth < 1:
         return no_asks(), notes
     if field.curvature is not None:
-        asks = merged_asks(asks, curvature_asks(surface, coarse, field.curvature, max_depth, DEFAULT_FEATURE_ANGLE))
+        asks = merged_asks(asks, curvature_asks(surface, coarse, field.curvature, max_depth, DEFAULT_FEATURE_ANGLE,
+                                                cut))
     if field.layers is not None:
         snapped = rays.snap_surface(coarse, surface.vertices)
         faces = np.ascontiguousarray(surface.faces, dtype=np.int64)

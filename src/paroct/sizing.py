@@ -93,6 +93,13 @@ class SizeField:
     patch_sizes: tuple = ()
 
     @property
+    def asks_boundary(self) -> bool:
+        """Whether anything may ask for a boundary finer than size: curvature, layers, patch
+        sizes, a region below size or a size function (lfs.py)."""
+        return (self.curvature is not None or self.layers is not None or bool(self.patch_sizes)
+                or self.function is not None or any(region.size < self.size for region in self.regions))
+
+    @property
     def coarse_depth(self) -> int:
         """Levels between the finest octants and the largest interior ones: log2(max_size / size)."""
         return int(round(np.log2(self.max_size / self.size)))
