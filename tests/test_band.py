@@ -186,12 +186,15 @@ def test_segment_cut_points_lie_on_the_surface_between_ends_of_two_classes():
     assert cut.size > 100
     coords = np.concatenate([starts[cut], ends[cut]])
     n = cut.size
-    fracs, unresolved = segment_cut_fractions(buckets, frame, snapped, faces, coords, np.arange(n), np.arange(n) + n,
-                                              start_in[cut])
+    fracs, unresolved, crossed = segment_cut_fractions(buckets, frame, snapped, faces, coords, np.arange(n),
+                                                       np.arange(n) + n, start_in[cut])
     assert not unresolved.any() and np.all((fracs >= 0) & (fracs <= 1))
     points = frame.to_space(starts[cut] + fracs[:, None] * (ends[cut] - starts[cut]))
-    # On the snapped surface: within the snap resolution of the input.
-    assert distances_to_triangles(points, surface.vertices, surface.faces).max() < 2 * frame.h * 2.0 ** -snap_bits(frame)
+    # On the snapped surface: within the snap resolution of the input, and on the triangle said.
+    snap = 2 * frame.h * 2.0 ** -snap_bits(frame)
+    assert distances_to_triangles(points, surface.vertices, surface.faces).max() < snap
+    corners = surface.vertices[surface.faces[crossed]]
+    assert max(naive.point_triangle_distance(p, *c) for p, c in zip(points, corners)) < snap
 
 
 def test_crossings_of_the_triangles_near_some_cells_cut_their_unit_edges_as_all_triangles_do():
@@ -216,7 +219,7 @@ def test_crossings_of_the_triangles_near_some_cells_cut_their_unit_edges_as_all_
         every = edge_cut_fractions(row_crossings(frame, snapped, faces, d), starts[cut], start_in[cut])
         some = edge_cut_fractions(row_crossings(frame, snapped, faces, d, np.flatnonzero(near)), starts[cut],
                                   start_in[cut])
-        assert np.array_equal(every[0], some[0]) and np.array_equal(every[1], some[1])
+        assert all(np.array_equal(a, b) for a, b in zip(every, some))  # fractions, unresolved, triangles
     assert cut_edges > 700
 
 

@@ -285,9 +285,43 @@ def test_patches_from_the_kept_boundary_faces_equal_those_from_matching(source, 
     result = paroct.mesh(source, divisions=divisions)
     assert result.boundary_faces is not None
     kept = result.boundary_patches()
-    matched = _tagged_boundary(result.mesh.points, result.mesh.tets, result.surface, None)
+    matched = _tagged_boundary(result.mesh.points, result.mesh.tets, result.surface, None, None, result.point_faces)
     for name in ("faces", "tets", "tet_faces", "patches"):
         assert np.array_equal(getattr(kept, name), getattr(matched, name)), name
     bogus = result.boundary_faces[:, [0, 0, 0]]  # one vertex three times: no tet's face
     with pytest.raises(ParoctError, match="no tet's faces"):
         _tagged_boundary(result.mesh.points, result.mesh.tets, result.surface, None, bogus)
+
+
+@pytest.mark.parametrize("source, divisions", [
+    (DATA / "angle_block.stl", 35),  # sharp edges: triangles straddling seams
+    (DATA / "bunny.stl", 40),  # a scan at 40 degrees: many small patches
+    (manifold3d.Manifold.cube([1, 1, 0.04]), 25),  # a band refined near thin walls (template edges cut)
+])
+def test_boundary_vertices_know_their_surface_triangle(source, divisions):
+    """Every boundary vertex stuffing placed lies on the surface triangle MeshResult.point_faces
+    names (its cut point's); interior vertices name none, nor those the pinch repair exposed.  A boundary triangle whose three
+    vertices lie on one patch takes it; the others, and a search of every centroid's nearest
+    triangle, agree with it but for chords beside a seam."""
+    from paroct.check import nearest_triangles
+
+    result = paroct.mesh(source, divisions=divisions)
+    points, faces, surface = result.mesh.points, result.boundary_faces, result.surface
+    on_boundary = np.zeros(points.shape[0], dtype=bool)
+    on_boundary[faces.ravel()] = True
+    placed = np.flatnonzero(result.point_faces >= 0)
+    # The others are inside vertices that the pinch repair's removed tets laid bare.
+    assert np.all(on_boundary[placed]) and np.count_nonzero(on_boundary) - placed.size <= 4 * result.report.repaired_tets
+    corners = surface.vertices[surface.faces[result.point_faces[placed]]]
+    gap = [naive.point_triangle_distance(p, *c) for p, c in zip(points[placed], corners)]
+    assert max(gap) < 1e-6 * result.report.size
+
+    tagged = result.boundary_patches()
+    labels = surface_patches(surface) if surface.face_groups is None else surface.face_groups + 1
+    vertex_patch = np.where(result.point_faces >= 0, labels[np.maximum(result.point_faces, 0)], 0)[tagged.faces]
+    agree = (vertex_patch[:, 0] > 0) & (vertex_patch == vertex_patch[:, :1]).all(axis=1)
+    assert np.array_equal(tagged.patches[agree], vertex_patch[agree, 0]) and 0 < (~agree).sum() < agree.sum()
+    nearest = labels[nearest_triangles(points[tagged.faces].mean(axis=1), surface.vertices, surface.faces)[1]]
+    assert np.array_equal(tagged.patches[~agree], nearest[~agree])
+    differ = np.flatnonzero(tagged.patches != nearest)
+    assert differ.size <= 1e-3 * tagged.patches.size

@@ -119,13 +119,14 @@ def test_cut_fractions_lie_on_the_surface():
         ends = np.array(ends)
         cut = (ends >= 0) & (inside != inside[np.maximum(ends, 0)])
         starts = points[cut]
-        frac, unresolved = rays.edge_cut_fractions(rays.row_crossings(frame, snapped, f, d), starts, inside[cut])
+        frac, unresolved, crossed = rays.edge_cut_fractions(rays.row_crossings(frame, snapped, f, d), starts, inside[cut])
         assert not unresolved.any()
         x = frame.to_space(starts + frac[:, None] * EDGE_DIRECTIONS[d])
-        # Distance to the nearest face plane of the unit box (rotated) is ~0.
+        # Distance to the nearest face plane of the unit box (rotated) is ~0, and to the triangle said.
         local = x @ _rotation(np.random.default_rng(3))
         dist = np.min(np.abs(np.concatenate([local, local - 1], axis=1)), axis=1)
         assert dist.max() < 1e-6
+        assert max(naive.point_triangle_distance(p, *v[f[t]]) for p, t in zip(x, crossed)) < 1e-6
 
 
 def _row_sums_reference(crossings, points):

@@ -121,13 +121,19 @@ class MeshResult:
     #: The mesh's boundary triangles (B, 3) int32, outward, as the pinch repair found them, or
     #: None (a result built by hand): boundary_patches starts from them.
     boundary_faces: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: The surface triangle (N,) int32 each mesh point lies on (an index into surface.faces):
+    #: the one crossed at its cut point, for the boundary vertices stuffing placed; -1 for
+    #: the others (inside, or moved since).  None for a result built by hand.
+    #: boundary_patches tags a boundary triangle whose three vertices lie on one patch so.
+    point_faces: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def boundary_patches(self, feature_angle: float | None = None) -> BoundaryPatches:
         """The mesh's boundary triangles, each tagged with the patch of the surface it lies
         on: the input's named groups if it has them and feature_angle is None, else the
         surface split at edges sharper than ``feature_angle`` degrees (default
         DEFAULT_FEATURE_ANGLE; boundary.boundary_patches)."""
-        return _tagged_boundary(self.mesh.points, self.mesh.tets, self._surface(), feature_angle, self.boundary_faces)
+        return _tagged_boundary(self.mesh.points, self.mesh.tets, self._surface(), feature_angle, self.boundary_faces,
+                                self.point_faces)
 
     def _surface(self) -> Surface:
         if self.surface is None:
@@ -144,7 +150,7 @@ class MeshResult:
         measured again, and a note says how many vertices moved."""
         labelled = surface_labels(self._surface(), feature_angle)
         tets = np.ascontiguousarray(self.mesh.tets, dtype=np.int64)  # once, for the tagging and the stars
-        patches = tag_boundary(self.mesh.points, tets, self.surface, *labelled, self.boundary_faces)
+        patches = tag_boundary(self.mesh.points, tets, self.surface, *labelled, self.boundary_faces, self.point_faces)
         snapped = snap_to_features(self.mesh.points, tets, patches, self.surface, labelled[0], self.report.size)
         del tets
         report = dataclasses.replace(self.report, warnings=list(self.report.warnings), notes=list(self.report.notes),
@@ -157,7 +163,12 @@ class MeshResult:
             report.fat_fraction = summary.n_fat / self.mesh.tets.shape[0]
         report.notes.append(f"sharp edges: {snapped.moved.size} of {snapped.tried} boundary vertices within one size of "
                             "an edge or corner between patches moved onto it (or part of the way)")
-        return MeshResult(TetMesh(snapped.points, self.mesh.tets), report, self.surface, self.boundary_faces)
+        point_faces = None
+        if self.point_faces is not None:  # a moved vertex lies on a curve, maybe off its triangle
+            point_faces = self.point_faces.copy()
+            point_faces[snapped.moved] = -1
+        return MeshResult(TetMesh(snapped.points, self.mesh.tets), report, self.surface, self.boundary_faces,
+                          point_faces)
 
 
 def estimate_tets(surface: Surface, field: SizeField) -> int:
@@ -768,8 +779,9 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
         stages.done("warps")
     # The lattice's tets and coordinates and the cut-edge tables are done with: freed before
     # _finish's face matching allocates its own, they are not in the peak.
+    cut_faces = cuts.faces
     del coords, tets, cuts, lattice_points, offsets
-    result = _finish(points, out_tets, inside, targets, report, stages, surface, h)
+    result = _finish(points, out_tets, inside, targets, cut_faces, report, stages, surface, h)
     if not mend and report.n_tets and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]:
         for name in MeshReport.__dataclass_fields__:  # the caller's report, as it came in
             setattr(report, name, getattr(fresh, name))
@@ -858,11 +870,12 @@ def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray
                         np.concatenate([walls.facing, np.full(points.shape[0], -1.0)]))
 
 
-def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray,
+def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray, cut_faces: np.ndarray,
             report: MeshReport, stages: _Stages, surface: Surface, size: float) -> MeshResult:
     """Repair pinches, fill the report's quality, volume and topology, and drop unused points:
     the result of a pass.  points, out_tets: stuff's output; inside, targets (V,): over the
-    lattice vertices, points 0..V-1 of the stuffed mesh; size: the band's longest edge."""
+    lattice vertices, points 0..V-1 of the stuffed mesh; cut_faces (E,): the surface triangle
+    of each cut point, points V..V+E-1 (CutEdges.faces); size: the band's longest edge."""
     core = _core(inside, targets, points.shape[0])
     out_tets, report.repaired_tets, faces_out, boundary = remove_pinches(out_tets, core)
     stages.done("repair")
@@ -870,6 +883,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     _measure(points, out_tets, core, boundary, report)
     _measure_misses(surface, points, faces_out, size, report)
     points, out_tets, new_id = _compact(points, out_tets)
+    point_faces = _point_faces(targets, cut_faces, new_id, points.shape[0])
     mesh = TetMesh(points, out_tets)
     faces_out = np.take(new_id, faces_out)  # every boundary vertex is a tet's: none is -1
     report.n_vertices = int(mesh.points.shape[0])
@@ -879,7 +893,22 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
             f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
-    return MeshResult(mesh, report, surface, faces_out)
+    return MeshResult(mesh, report, surface, faces_out, point_faces)
+
+
+@nb.njit(cache=True)
+def _point_faces(targets, cut_faces, new_id, n_points):
+    """The surface triangle (n_points,) int32 each point of the compacted mesh lies on: stuffed
+    point p (lattice vertices, targets (V,), then cut points, cut_faces (E,)) is point
+    new_id[p] (-1: dropped); a lattice vertex lies on its warp target's, -1 if it does not
+    warp; a cut point on its own."""
+    faces = np.empty(n_points, dtype=np.int32)
+    n = targets.shape[0]
+    for p in range(new_id.shape[0]):
+        q = new_id[p]
+        if q >= 0:
+            faces[q] = cut_faces[p - n] if p >= n else (cut_faces[targets[p]] if targets[p] >= 0 else -1)
+    return faces
 
 
 #: A surface vertex with no mesh boundary vertex within this many times the band's longest
@@ -1124,8 +1153,9 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         stages.done("quality")
         return None, asks
     # As in _mesh_at: what stuffing needed is freed before _finish allocates.
+    cut_faces = cuts.faces
     del coords, tets, cuts, spacing, lattice_points, flags, offsets
-    return _finish(points, out_tets, inside, targets, report, stages, surface, field.size), asks
+    return _finish(points, out_tets, inside, targets, cut_faces, report, stages, surface, field.size), asks
 
 
 def _mend(lattice_points, coords, tets, inside, cuts: CutEdges, targets, points, out_tets,
@@ -1362,13 +1392,14 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
     ``buckets`` (needed only if there are such edges)."""
     starts, ends, dirs, *table = collect_cut_edges(np.ascontiguousarray(tets), inside, coords)
     fracs = np.empty(starts.shape[0])
+    crossed = np.empty(starts.shape[0], dtype=np.int32)
     other = np.nonzero(dirs < 0)[0]
     if other.size:
         if buckets is None:
             raise ValueError(f"{other.size} cut edges are not unit lattice edges: cut_edges needs face buckets")
-        f, unresolved = rays.segment_cut_fractions(buckets, frame, snapped, faces, coords, starts[other], ends[other],
-                                                   inside[starts[other]])
-        fracs[other] = f
+        f, unresolved, hit = rays.segment_cut_fractions(buckets, frame, snapped, faces, coords, starts[other],
+                                                        ends[other], inside[starts[other]])
+        fracs[other], crossed[other] = f, hit
         report.unresolved_cuts += int(unresolved.sum())
     near = None
     status = np.zeros(starts.shape[0], dtype=np.int8)
@@ -1387,11 +1418,11 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
             if near is None:
                 near = np.flatnonzero(_faces_near_unit_edges(frame, buckets, coords, starts, ends, dirs, faces.shape[0]))
             rows = rays.row_crossings(frame, snapped, faces, d, near)
-        rays.add_edge_cut_fractions(rows, coords, starts, inside, dirs, fracs, status)
+        rays.add_edge_cut_fractions(rows, coords, starts, inside, dirs, fracs, status, crossed)
     report.unresolved_cuts += int(status.sum())
     points = _cut_points(coords, starts, ends, fracs, np.ascontiguousarray(frame.origin, dtype=np.float64),
                          float(frame.h), LATTICE_TO_SPACE)
-    return CutEdges(starts, ends, dirs, fracs, points, tuple(table))
+    return CutEdges(starts, ends, dirs, fracs, points, tuple(table), crossed)
 
 
 @nb.njit(cache=True)

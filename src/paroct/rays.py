@@ -581,11 +581,14 @@ def _row_span(keys, row_box, row_starts, key, hint):
 
 
 @nb.njit(cache=True, parallel=True)
-def _edge_cuts(keys, row_box, row_starts, fracs, basis, points, starts, start_inside, dirs, direction, out, status):
+def _edge_cuts(keys, row_box, row_starts, fracs, crossed, basis, points, starts, start_inside, dirs, direction, out,
+               status, out_faces):
     """For each edge e with dirs[e] == direction, from points[starts[e]] one step along the
     direction: out[e] = the crossing in its cell nearest the inside end, else a crossing
-    exactly at its far end (fraction 1), else the midpoint with status[e] = 1.  Other edges
-    are left alone (the caller's arrays serve every direction: no gathers, no scatter)."""
+    exactly at its far end (fraction 1), else the midpoint with status[e] = 1; out_faces[e]
+    = the triangle crossed there (crossed: the crossings' triangles), -1 at a midpoint.
+    Other edges are left alone (the caller's arrays serve every direction: no gathers, no
+    scatter)."""
     m = starts.shape[0]
     n_chunks = min(m // 256 + 1, 64)
     for chunk in nb.prange(n_chunks):
@@ -599,38 +602,47 @@ def _edge_cuts(keys, row_box, row_starts, fracs, basis, points, starts, start_in
             hi = lower_bound(keys, key + 1, lo, end)  # keys are integers: key + 1 is cell t + 1
             status[e] = 0
             if hi > lo:
-                out[e] = fracs[lo] if start_inside[starts[e]] else fracs[hi - 1]
+                at = lo if start_inside[starts[e]] else hi - 1
+                out[e] = fracs[at]
+                out_faces[e] = crossed[at]
             elif hi < end and keys[hi] == key + 1 and fracs[hi] == 0.0:
                 out[e] = 1.0
+                out_faces[e] = crossed[hi]
             else:
                 out[e] = 0.5
+                out_faces[e] = -1
                 status[e] = 1
 
 
-def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray, start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray,
+                       start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cut point of each lattice edge (start, start + d) along the crossings' direction d.
 
     starts: (E, 3) int64 lattice points; start_inside: (E,) bool class of the start point
     (the other end has the other class).  Returns (fractions (E,) in [0, 1] from start to
     end, unresolved (E,) int8 = 1 where the rows found no crossing, which only happens for
-    edges with an endpoint exactly on the surface, resolved here to the midpoint).
+    edges with an endpoint exactly on the surface, resolved here to the midpoint, and the
+    triangle (E,) int32 each cut point lies on: an index into the faces crossed, -1 at a
+    midpoint).
     """
     starts = np.ascontiguousarray(starts, dtype=np.int64)
     out = np.empty(starts.shape[0], dtype=np.float64)
     status = np.empty(starts.shape[0], dtype=np.int8)
+    faces = np.empty(starts.shape[0], dtype=np.int32)
     add_edge_cut_fractions(crossings, starts, np.arange(starts.shape[0]), start_inside,
-                           np.full(starts.shape[0], crossings.direction), out, status)
-    return out, status
+                           np.full(starts.shape[0], crossings.direction), out, status, faces)
+    return out, status, faces
 
 
 def add_edge_cut_fractions(crossings: RowCrossings, points: np.ndarray, starts: np.ndarray, inside: np.ndarray,
-                           dirs: np.ndarray, fracs: np.ndarray, status: np.ndarray) -> None:
+                           dirs: np.ndarray, fracs: np.ndarray, status: np.ndarray, faces: np.ndarray) -> None:
     """edge_cut_fractions of the edges e whose dirs[e] is the crossings' direction, written to
-    fracs[e] and status[e] in place: the edges start at points[starts[e]] (points (N, 3)
-    int64 lattice points, inside (N,) their classes); other edges are left alone."""
-    _edge_cuts(crossings.keys, crossings.row_box, crossings.row_starts, crossings.fracs, row_basis(crossings.direction),
-               points, np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(inside, dtype=np.bool_),
-               np.ascontiguousarray(dirs, dtype=np.int8), crossings.direction, fracs, status)
+    fracs[e], status[e] and faces[e] in place: the edges start at points[starts[e]] (points
+    (N, 3) int64 lattice points, inside (N,) their classes); other edges are left alone."""
+    _edge_cuts(crossings.keys, crossings.row_box, crossings.row_starts, crossings.fracs, crossings.faces,
+               row_basis(crossings.direction), points, np.ascontiguousarray(starts, dtype=np.int64),
+               np.ascontiguousarray(inside, dtype=np.bool_), np.ascontiguousarray(dirs, dtype=np.int8),
+               crossings.direction, fracs, status, faces)
 
 
 @nb.njit(cache=True, inline="always")
@@ -674,7 +686,7 @@ def _bucket_boxes(bucket_faces, triangles, slack):
 
 @nb.njit(cache=True, parallel=True)
 def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts, ends, start_inside,
-                  cell_bits, key_shift, out, status):
+                  cell_bits, key_shift, out, status, out_faces):
     boxes = _bucket_boxes(bucket_faces, triangles, _BOX_SLACK)
     # Scalars, not small arrays: five allocations an edge, and a call per triangle tried,
     # were most of the kernel.
@@ -690,6 +702,7 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts,
         key = morton_key(cx << key_shift, cy << key_shift, cz << key_shift)
         k = np.searchsorted(bucket_keys, key)
         best = -1.0
+        crossed = -1
         if k < bucket_keys.shape[0] and bucket_keys[k] == key:
             for j in range(offsets[k], offsets[k + 1]):
                 if (boxes[j, 0] > max(ax, bx) or boxes[j, 1] > max(ay, by) or boxes[j, 2] > max(az, bz)
@@ -701,11 +714,13 @@ def _segment_cuts(bucket_keys, offsets, bucket_faces, triangles, coords, starts,
                 # The crossing nearest the inside end, as for unit edges.
                 if best < 0 or (t < best if start_inside[e] else t > best):
                     best = t
+                    crossed = bucket_faces[j]
         status[e] = 0
         if best < 0:
             best = 0.5
             status[e] = 1
         out[e] = best
+        out_faces[e] = crossed
 
 
 #: Lattice units by which a triangle's box must miss an edge's box to be skipped untested: far
@@ -727,7 +742,7 @@ def _lattice_triangles(snapped, faces, unit):
 
 def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray,
                           coords: np.ndarray, starts: np.ndarray, ends: np.ndarray,
-                          start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                          start_inside: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cut point of each edge (coords[starts[e]], coords[ends[e]]) that is not a unit lattice
     edge: coarser lattice edges and the edges of transition templates, each inside one leaf
     no coarser than the buckets' level.
@@ -735,14 +750,16 @@ def segment_cut_fractions(buckets: FaceBuckets, frame: FatFrame, snapped: np.nda
     The triangles tried are those of the bucket (octree.face_buckets) holding the edge; the
     crossing is found in floats (the ends' classes are exact, from rows), and the one nearest
     the inside end is taken.  Returns (fractions (E,) in [0, 1] from start to end,
-    unresolved (E,) int8 = 1 where no crossing was found: midpoint).
+    unresolved (E,) int8 = 1 where no crossing was found: midpoint, and the triangle (E,)
+    int32 crossed there, an index into faces, -1 at a midpoint).
     """
     out = np.empty(starts.shape[0], dtype=np.float64)
     status = np.empty(starts.shape[0], dtype=np.int8)
+    crossed = np.empty(starts.shape[0], dtype=np.int32)
     triangles = _lattice_triangles(np.ascontiguousarray(snapped, dtype=np.int64), np.ascontiguousarray(faces),
                                    float(1 << snap_bits(frame)))
     _segment_cuts(buckets.keys, buckets.offsets, buckets.faces, triangles, np.ascontiguousarray(coords, dtype=np.int64),
                   np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(ends, dtype=np.int64),
                   np.ascontiguousarray(start_inside, dtype=np.bool_), frame.levels - buckets.level,
-                  MAX_LEVEL - frame.levels, out, status)
-    return out, status
+                  MAX_LEVEL - frame.levels, out, status, crossed)
+    return out, status, crossed

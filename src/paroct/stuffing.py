@@ -278,7 +278,9 @@ class CutEdges:
     """Tet edges whose ends differ in class.  starts, ends: (E,) vertex ids; directions: (E,)
     as collect_cut_edges gives them (-1 off the unit lattice edges); fracs: (E,) cut position from
     start, in [0, 1]; points: (E, 3) space positions of the cut points; table: the lookup
-    of collect_cut_edges (first, last, partner, edge) finding an edge from its two ends."""
+    of collect_cut_edges (first, last, partner, edge) finding an edge from its two ends;
+    faces: (E,) int32 the surface triangle each cut point lies on (-1 where no crossing was
+    found: a midpoint), or None for cuts not taken from a surface."""
 
     starts: np.ndarray
     ends: np.ndarray
@@ -286,6 +288,7 @@ class CutEdges:
     fracs: np.ndarray
     points: np.ndarray
     table: tuple
+    faces: np.ndarray | None = None
 
 
 def warp_targets(cuts: CutEdges, coords: np.ndarray, h: float, spacing: np.ndarray | None = None) -> np.ndarray:
