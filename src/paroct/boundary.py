@@ -129,9 +129,9 @@ def _patches(vertices, faces, normals, min_cos):
     labels = np.zeros(nf, dtype=np.int32)
     n_patches = 0
     for f in range(nf):
-        r = f
-        while parent[r] != r:
-            r = parent[r]
+        # union keeps parent[x] <= x, so parent[f] was flattened to its root already.
+        r = parent[parent[f]]
+        parent[f] = r
         if labels[r] == 0:
             n_patches += 1
             labels[r] = n_patches

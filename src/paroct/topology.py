@@ -200,25 +200,28 @@ def half_edge_twins(faces, n_vertices):
     """The twin (F * 3,) of each half-edge h = 3 f + j (from faces[f, j] to faces[f, (j + 1) % 3]):
     the half-edge running the other way along the same edge, or -1 if none (a closed,
     consistently oriented surface has exactly one).  A counting sort of the half-edges by
-    smaller vertex, then a search of each bucket."""
+    smaller vertex, each slot holding its larger vertex and direction, then a search of each
+    bucket (through the faces, the search took 9 of armadillo's 15 ms of surface_patches)."""
     nf = faces.shape[0]
     start = edge_bucket_starts(faces, n_vertices)
     fill = start[:-1].copy()
     slot = np.empty(3 * nf, dtype=np.int64)
+    larger = np.empty(3 * nf, dtype=np.int64)
+    upward = np.empty(3 * nf, dtype=np.bool_)  # from the smaller vertex to the larger
     for f in range(nf):
         for j in range(3):
-            a = min(faces[f, j], faces[f, (j + 1) % 3])
+            p, q = faces[f, j], faces[f, (j + 1) % 3]
+            a = min(p, q)
             slot[fill[a]] = 3 * f + j
+            larger[fill[a]] = max(p, q)
+            upward[fill[a]] = p < q
             fill[a] += 1
     twin = np.full(3 * nf, -1, dtype=np.int64)
     for a in range(n_vertices):
         for s in range(start[a], start[a + 1]):
-            h = slot[s]
-            p, q = faces[h // 3, h % 3], faces[h // 3, (h % 3 + 1) % 3]
             for t in range(start[a], start[a + 1]):
-                g = slot[t]
-                if faces[g // 3, g % 3] == q and faces[g // 3, (g % 3 + 1) % 3] == p:
-                    twin[h] = g
+                if larger[t] == larger[s] and upward[t] != upward[s]:
+                    twin[slot[s]] = slot[t]
                     break
     return twin
 
