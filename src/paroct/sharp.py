@@ -30,6 +30,7 @@ import numba as nb
 import numpy as np
 
 from .boundary import BoundaryPatches
+from .octant import sorted_unique
 from .quality import _tet_measures
 from .surface import Surface
 from .topology import half_edge_twins, vertex_stars
@@ -77,8 +78,10 @@ def feature_curves(surface: Surface, labels: np.ndarray) -> FeatureCurves:
 def _meeting_vertices(vertex: np.ndarray, label: np.ndarray, at_least: int) -> np.ndarray:
     """The distinct vertices among vertex (K,) that come with at least at_least distinct labels (K,)."""
     width = np.int64(label.max(initial=0)) + 1
-    ids, counts = np.unique(np.unique(vertex.astype(np.int64) * width + label) // width, return_counts=True)
-    return ids[counts >= at_least]
+    owner = sorted_unique(vertex.astype(np.int64) * width + label) // width  # ascending, a run per vertex
+    first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if owner.size else np.zeros(0, dtype=np.int64)
+    counts = np.diff(np.r_[first, owner.size])
+    return owner[first[counts >= at_least]]
 
 
 @dataclass(frozen=True)
@@ -101,7 +104,8 @@ def snap_to_features(points: np.ndarray, tets: np.ndarray, boundary: BoundaryPat
     Returns the new points; the arrays given are not changed."""
     points = np.array(points, dtype=np.float64)  # a copy: moved in place below
     width = np.int64(max(int(boundary.n_patches), 1) + 1)
-    touching = np.unique(boundary.faces.astype(np.int64).ravel() * width + np.repeat(boundary.patches, 3))
+    # sorted_unique: np.unique hashed fea_part's 0.8 M (vertex, patch) keys at diag/40 in 24 ms.
+    touching = sorted_unique(boundary.faces.astype(np.int64).ravel() * width + np.repeat(boundary.patches, 3))
     owner, patch = touching // width, (touching % width).astype(np.int32)
     first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
     count = np.diff(np.r_[first, owner.size])
