@@ -8,8 +8,11 @@ bodies so), the groups are the patches, with their names.  Otherwise, or when a 
 angle is asked for, a patch is a set of surface triangles joined across edges where the
 surface turns by less than the feature angle (the angle between the two triangles'
 normals), the usual rule of CAD and of Gmsh's ``ClassifySurfaces``: a box has 6 patches, a
-cylinder 3 at 40 degrees.  Each boundary triangle of the mesh takes the patch of the input
-triangle nearest its centroid (exact point-to-triangle distances, check.nearest_triangles).
+cylinder 3 at 40 degrees.  Each boundary triangle of a mesh paroct made whose three vertices
+lie on input triangles of one patch (MeshResult.point_faces: stuffing knows the triangle each
+cut point lies on) takes that patch; the others, and every triangle of a mesh given as
+arrays, take the patch of the input triangle nearest their centroid (exact point-to-triangle
+distances, check.nearest_triangles).
 Stuffing cuts sharp edges (by less than one size), so the tagged faces along a sharp edge
 split between its two patches where the cut falls, not on the edge itself, unless the
 boundary is moved onto the edges after (MeshResult.with_sharp_edges, sharp.py).
