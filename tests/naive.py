@@ -434,9 +434,8 @@ def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> n
 def cut_edges(tets: np.ndarray, inside: np.ndarray, coords: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(starts, ends, directions) of the distinct tet edges whose ends differ in class, numbered
     in order of first occurrence (tet by tet, edges (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)), each
-    from the end its vector points away from when that vector has no negative component, else
-    from its end in the tet's order swapped; direction: index in EDGE_DIRECTIONS of a unit
-    lattice edge, -1 otherwise.  A dict on the sorted pair."""
+    from its end whose coordinates come first as tuples (x, y, z), then by id; direction: index in
+    EDGE_DIRECTIONS of a unit lattice edge, -1 otherwise.  A dict on the sorted pair."""
     from paroct.frame import EDGE_DIRECTIONS
 
     seen: dict[tuple[int, int], int] = {}
@@ -447,9 +446,9 @@ def cut_edges(tets: np.ndarray, inside: np.ndarray, coords: np.ndarray) -> tuple
             if inside[p] == inside[q] or (min(p, q), max(p, q)) in seen:
                 continue
             seen[min(p, q), max(p, q)] = len(starts)
+            if (tuple(coords[q]), q) < (tuple(coords[p]), p):
+                p, q = q, p
             d = coords[q] - coords[p]
-            if (d < 0).any():
-                p, q, d = q, p, -d
             hits = np.flatnonzero((EDGE_DIRECTIONS == d).all(axis=1))
             starts.append(p)
             ends.append(q)
@@ -462,13 +461,15 @@ def warp_targets(coords: np.ndarray, starts, ends, fracs, spacing, h: float) -> 
     0.24999 for long lattice edges (two nonzero components), 0.41189 for short ones, 0.24999
     for edges off the lattices (a leaf of side 2 gcd(|d|)); each end's reach is alpha times
     min(1, its spacing / the edge's spacing); a vertex warps to its closest violating cut
-    point, the first such edge on ties."""
+    point, on ties the one whose edge's other end has the smaller coordinates as a tuple
+    (then id)."""
     from math import gcd
 
     from paroct.frame import LATTICE_TO_SPACE
 
     best = np.full(coords.shape[0], np.inf)
     target = np.full(coords.shape[0], -1, dtype=np.int64)
+    other = {}  # vertex -> its target edge's other end, as a tuple
     for e, (a, b, f) in enumerate(zip(starts.tolist(), ends.tolist(), fracs.tolist())):
         d = coords[b] - coords[a]
         s = int(np.abs(d).max())
@@ -478,9 +479,9 @@ def warp_targets(coords: np.ndarray, starts, ends, fracs, spacing, h: float) -> 
         else:
             alpha, s = 0.24999, 2 * gcd(*np.abs(d).tolist())
         length = float(np.linalg.norm(LATTICE_TO_SPACE @ d)) * h
-        for v, t in ((a, f), (b, 1.0 - f)):
-            if t < alpha * min(1.0, spacing[v] / s) and t * length < best[v]:
-                best[v], target[v] = t * length, e
+        for v, w, t in ((a, b, f), (b, a, 1.0 - f)):
+            if t < alpha * min(1.0, spacing[v] / s) and (t * length, tuple(coords[w]), w) < (best[v], *other.get(v, ((), 0))):
+                best[v], target[v], other[v] = t * length, e, (tuple(coords[w]), w)
     return target
 
 

@@ -703,3 +703,50 @@ def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_
             near_box = np.any((np.abs(u - coords.min(axis=0)) < 1e-9) | (np.abs(u - coords.max(axis=0)) < 1e-9), axis=(1, 2))
             assert np.allclose(np.linalg.norm(tri[~near_box] - centre, axis=2), radius)
     assert before > 100 and after <= before / 10
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_cut_edges_and_warps_do_not_depend_on_the_numbering(seed):
+    """The cut edges' directions (so the float cut points found along them) and the warps'
+    ties follow the points' places, not their ids nor the order of the tets: a graded octree
+    cut by a sphere centred on a lattice point (many cut points at equal distances), its
+    vertices renumbered at random and its tets shuffled, gives the same edges, cut points
+    and warps.  (A partition of the leaves would number its points its own way.)"""
+    from paroct.stuffing import ALPHA_LONG, ALPHA_SHORT, _violations
+
+    rng = np.random.default_rng(seed)
+    anchors, sides = _random_balanced_tree(seed, 4)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
+    spacing = lattice.vertex_spacing(vertices, sides)
+    x = coords @ LATTICE_TO_SPACE.T
+    middle = coords[np.argmin(np.abs(coords - coords.mean(axis=0)).sum(axis=1))]
+    centre, radius = middle @ LATTICE_TO_SPACE.T, 0.37 * (x.max(axis=0) - x.min(axis=0)).min()
+
+    def cut_and_warp(coords, tets, spacing):
+        """{(start, end) coordinates: cut fraction} and each vertex's target as its edge's ends."""
+        x = coords @ LATTICE_TO_SPACE.T
+        phi, fracs_of = _sphere(coords, centre, radius)
+        starts, ends, dirs, *table = collect_cut_edges(tets, phi > 0, coords)
+        fracs = fracs_of(x, starts, ends)
+        cuts = CutEdges(starts, ends, dirs, fracs, x[starts] + fracs[:, None] * (x[ends] - x[starts]), tuple(table))
+        targets = warp_targets(cuts, coords, 1.0, spacing)
+        distance, violated = _violations(coords, starts, ends, fracs, spacing, LATTICE_TO_SPACE, 1.0, ALPHA_LONG,
+                                         ALPHA_SHORT)
+        edges = {(tuple(coords[s]), tuple(coords[e])): f for s, e, f in zip(starts, ends, fracs)}
+        warped = {tuple(coords[v]): (tuple(coords[starts[t]]), tuple(coords[ends[t]])) for v, t in enumerate(targets)
+                  if t >= 0}
+        at = np.where(violated == 0, starts, ends)[violated >= 0]
+        pairs = np.stack([at, distance[violated >= 0]])  # (vertex, distance) of each violating cut
+        ties = np.unique(pairs, axis=1).shape[1] < pairs.shape[1]  # a vertex with two at one distance
+        return edges, warped, ties, (dirs < 0).sum()
+
+    edges, warped, ties, off_lattice = cut_and_warp(coords, tets, spacing)
+    perm = rng.permutation(coords.shape[0])  # old vertex v is new vertex perm[v]
+    moved = np.empty_like(coords)
+    moved[perm] = coords
+    moved_spacing = np.empty_like(spacing)
+    moved_spacing[perm] = spacing
+    again = cut_and_warp(moved, perm[tets][rng.permutation(tets.shape[0])].astype(np.int32), moved_spacing)
+    assert edges == again[0] and warped == again[1]
+    assert len(edges) > 100 and len(warped) > 20 and off_lattice > 0 and ties  # the rules are exercised

@@ -101,9 +101,8 @@ def collect_cut_edges(tets, inside, coords):
 @nb.njit(cache=True, parallel=True)
 def _chain_cut_edges(tets, inside, n_vertices, n_chunks):
     """The distinct mixed edges in order of first occurrence, (lower (E,) int32: the smaller
-    end a, or -1 - a where the first tet holding the edge lists its larger end first; upper
-    (E,) int32: the larger end; chain (E,) int32 and head (V,) int32: collect_cut_edges'
-    lookup table).
+    end; upper (E,) int32: the larger end; chain (E,) int32 and head (V,) int32:
+    collect_cut_edges' lookup table).
 
     n_chunks runs of tets are chained in parallel, each with its own heads into its own part
     of the arrays (4 slots a tet); then each run's edges not in an earlier run are moved
@@ -124,11 +123,10 @@ def _chain_cut_edges(tets, inside, n_vertices, n_chunks):
     n = ends[0]
     for c in range(1, n_chunks):
         for s in range(4 * (m * c // n_chunks), ends[c]):  # never below n: earlier runs fill at most 4 a tet
-            b = upper[s]
-            a = lower[s] if lower[s] >= 0 else -1 - lower[s]
+            a, b = lower[s], upper[s]
             if _edge_of(head, upper, chain, a, b) >= 0:
                 continue
-            lower[n] = lower[s]
+            lower[n] = a
             upper[n] = b
             chain[n] = head[a]
             head[a] = n
@@ -152,7 +150,7 @@ def _chain_tets(tets, inside, t0, t1, head, lower, upper, chain, n):
             b = max(p, q)
             if _edge_of(head, upper, chain, a, b) >= 0:
                 continue
-            lower[n] = a if p < q else -1 - a
+            lower[n] = a
             upper[n] = b
             chain[n] = head[a]
             head[a] = n
@@ -160,24 +158,49 @@ def _chain_tets(tets, inside, t0, t1, head, lower, upper, chain, n):
     return n
 
 
+@nb.njit(cache=True, inline="always")
+def _coords_less(coords, a, b):
+    """Whether point a's lattice coordinates come before b's lexicographically (x, then y,
+    then z; the smaller id where they are equal, which a lattice's distinct points never
+    are): the order that breaks the ties of the cut edges' directions and of the warps, the
+    same however the points are numbered."""
+    for i in range(3):
+        if coords[a, i] != coords[b, i]:
+            return coords[a, i] < coords[b, i]
+    return a < b
+
+
+@nb.njit(cache=True, inline="always")
+def _lattice_level(coords, a):
+    """log2 of the coarsest spacing whose lattice holds point a (64 at the origin)."""
+    m = coords[a, 0] | coords[a, 1] | coords[a, 2]
+    if m == 0:
+        return 64
+    k = 0
+    while (m & 1) == 0:
+        m >>= 1
+        k += 1
+    return k
+
+
 @nb.njit(cache=True, parallel=True)
 def _oriented_edges(lower, upper, coords):
     """starts, ends (E,) int64 and directions (E,) int8 of collect_cut_edges from
-    _chain_cut_edges' ends: each edge from the end its vector points away from when that
-    vector has no negative component, else from the end its first tet lists first."""
+    _chain_cut_edges' ends: each edge from its end of lexicographically smaller lattice
+    coordinates (_coords_less), which for a vector with no negative component is the end it
+    points away from.  So an edge's direction, and the float cut point found along it,
+    follow its ends' places alone, not their ids or the order of the tets."""
     n = lower.shape[0]
     starts = np.empty(n, dtype=np.int64)
     ends = np.empty(n, dtype=np.int64)
     dirs = np.empty(n, dtype=np.int8)  # 7 of 8 bytes a cut edge spared, read once a direction
     for i in nb.prange(n):
-        a = lower[i]
-        p, q = (np.int64(a), np.int64(upper[i])) if a >= 0 else (np.int64(upper[i]), np.int64(-1 - a))
+        p, q = np.int64(lower[i]), np.int64(upper[i])
+        if _coords_less(coords, q, p):
+            p, q = q, p
         dx = coords[q, 0] - coords[p, 0]
         dy = coords[q, 1] - coords[p, 1]
         dz = coords[q, 2] - coords[p, 2]
-        if dx < 0 or dy < 0 or dz < 0:
-            p, q = q, p
-            dx, dy, dz = -dx, -dy, -dz
         bits3 = (1 if dx > 0 else 0) | (2 if dy > 0 else 0) | (4 if dz > 0 else 0)
         starts[i] = p
         ends[i] = q
@@ -199,19 +222,27 @@ def _edge_of(head, upper, chain, a, b):
 
 
 @nb.njit(cache=True)
-def _warp(n_vertices, starts, ends, distance, violated):
+def _warp(coords, starts, ends, distance, violated):
     """Warp target per vertex (V,) int64: the cut edge (index) of its closest violating cut
-    point, or -1 (_violations: which end each cut violates, at what distance)."""
-    best = np.full(n_vertices, np.inf)
-    target = np.full(n_vertices, -1, dtype=np.int64)
+    point, or -1 (_violations: which end each cut violates, at what distance); of cut points
+    at the same distance, the one on the edge whose other end comes first (_coords_less)."""
+    best = np.full(coords.shape[0], np.inf)
+    target = np.full(coords.shape[0], -1, dtype=np.int64)
     for e in range(starts.shape[0]):
         if violated[e] < 0:
             continue
-        v = starts[e] if violated[e] == 0 else ends[e]
-        if distance[e] < best[v]:
+        v, w = (starts[e], ends[e]) if violated[e] == 0 else (ends[e], starts[e])
+        tie = distance[e] == best[v] and _coords_less(coords, w, _other_end(starts, ends, target[v], v))
+        if distance[e] < best[v] or tie:
             best[v] = distance[e]
             target[v] = e
     return target
+
+
+@nb.njit(cache=True, inline="always")
+def _other_end(starts, ends, e, v):
+    """The end of cut edge e that is not v."""
+    return ends[e] if starts[e] == v else starts[e]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -308,7 +339,7 @@ def warp_targets(cuts: CutEdges, coords: np.ndarray, h: float, spacing: np.ndarr
         spacing = np.ones(coords.shape[0], dtype=np.int64)
     distance, violated = _violations(coords, cuts.starts, cuts.ends, cuts.fracs, spacing, LATTICE_TO_SPACE, float(h),
                                      ALPHA_LONG, ALPHA_SHORT)
-    return _warp(coords.shape[0], cuts.starts, cuts.ends, distance, violated)
+    return _warp(coords, cuts.starts, cuts.ends, distance, violated)
 
 
 def _prism_triangulations() -> np.ndarray:
@@ -407,7 +438,8 @@ def _quad_first_diagonal(coords, a, b, e):
     coordinates in which a exceeds cut(b, e), take a-cut(b, e) when k is odd for an edge of
     grid corners, even for an edge of cube centres (the exact test compares 2a with b + e,
     as the rule does not depend on where the cut lies on the open edge).  On any other face
-    (transition templates), the diagonal at the smaller vertex id.
+    (transition templates), the diagonal at the vertex that comes first (_coords_less): a
+    total order of the vertices, so the quads of a prism never cycle, whatever the ids.
 
     Inlined by numba at its four call sites in _stencil_tet, it made _stencils take 46 s to
     compile; called, 7 s, and _stencils runs as fast (it only runs on cut tets).
