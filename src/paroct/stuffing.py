@@ -438,8 +438,10 @@ def _quad_first_diagonal(coords, a, b, e):
     coordinates in which a exceeds cut(b, e), take a-cut(b, e) when k is odd for an edge of
     grid corners, even for an edge of cube centres (the exact test compares 2a with b + e,
     as the rule does not depend on where the cut lies on the open edge).  On any other face
-    (transition templates), the diagonal at the vertex that comes first (_coords_less): a
-    total order of the vertices, so the quads of a prism never cycle, whatever the ids.
+    (transition templates), the diagonal at the smaller vertex id: number_vertices numbers
+    the face centres that are no leaf's corner after every corner, which keeps the quads of
+    a prism from cycling; an order of the coordinates alone does not (docs/design.md,
+    "Toward partitions by Morton ranges").
 
     Inlined by numba at its four call sites in _stencil_tet, it made _stencils take 46 s to
     compile; called, 7 s, and _stencils runs as fast (it only runs on cut tets).
