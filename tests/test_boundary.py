@@ -3,6 +3,7 @@ and the tags written where each format keeps them."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import manifold3d
@@ -325,3 +326,6 @@ def test_boundary_vertices_know_their_surface_triangle(source, divisions):
     assert np.array_equal(tagged.patches[~agree], nearest[~agree])
     differ = np.flatnonzero(tagged.patches != nearest)
     assert differ.size <= 1e-3 * tagged.patches.size
+    tiny = paroct.load_surface(manifold3d.Manifold.tetrahedron())  # 4 triangles: not the meshed surface's
+    with pytest.raises(ParoctError, match="belong to another surface"):
+        dataclasses.replace(result, surface=tiny).boundary_patches()

@@ -184,6 +184,9 @@ def _vertex_patches(faces: np.ndarray, labels: np.ndarray, point_faces: np.ndarr
     patches straddles their seam, where the nearest triangle to its centroid decides."""
     if point_faces is None:
         return np.zeros(faces.shape[0], dtype=np.int32)
+    if point_faces.size and point_faces.max() >= labels.shape[0]:
+        raise ParoctError(f"point_faces name triangles up to {point_faces.max()}, but the surface has {labels.shape[0]}: "
+                          "they belong to another surface (a MeshResult's surface replaced?)")
     return _agreed_patches(faces, np.ascontiguousarray(labels, dtype=np.int32),
                            np.ascontiguousarray(point_faces, dtype=np.int32))
 
