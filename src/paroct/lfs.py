@@ -39,6 +39,7 @@ from .boundary import surface_labels, surface_patches
 from .errors import ParoctError
 from .features import ThinFeatures, face_normals
 from .frame import SPACE_TO_LATTICE, FatFrame
+from .sizing import evaluated_size_function
 from .surface import Surface
 
 
@@ -633,14 +634,7 @@ def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int,
         return no_asks(), []
     cut = surface_pieces(surface, frame) if cut is None else cut
     pieces, probes = cut.corners, cut.probes
-    try:
-        values = np.asarray(function(probes), dtype=np.float64)
-    except Exception as exc:  # the user's function failed: say so in one line
-        raise ParoctError(f"size_function failed on {probes.shape[0]} points of the surface: {exc}") from None
-    if values.shape != (probes.shape[0],) or not np.all(values > 0):
-        raise ParoctError(f"size_function returned shape {values.shape} for {probes.shape[0]} points of the surface, "
-                          "or a non-positive or NaN size; expected positive sizes, one per point")
-    wanted = values.reshape(-1, 4).min(axis=1)
+    wanted = evaluated_size_function(function, probes, "points of the surface").reshape(-1, 4).min(axis=1)
     levels = np.minimum(np.ceil(np.log2(frame.h / wanted) - 1e-9), max_depth).astype(np.int64)
     asked = [(pieces[levels == level], level) for level in np.unique(levels[levels > 0]).tolist()]
     if not asked:

@@ -183,17 +183,25 @@ def _required_size(field: SizeField, keys: np.ndarray, level: int, frame: FatFra
             meets = (gap**2).sum(axis=1) <= r.radius**2
         need[meets] = np.minimum(need[meets], r.size)
     if field.function is not None and keys.shape[0]:
-        points = samples.reshape(-1, 3)
-        try:
-            values = np.asarray(field.function(points), dtype=np.float64)
-        except Exception as exc:  # the user's function failed: say so in one line
-            raise ParoctError(f"size_function failed on {points.shape[0]} points: {exc}") from None
-        if values.shape != (points.shape[0],):
-            raise ParoctError(f"size_function returned shape {values.shape} for {points.shape[0]} points; expected ({points.shape[0]},)")
-        if not np.all(values > 0):
-            raise ParoctError("size_function returned a non-positive or NaN size")
+        values = evaluated_size_function(field.function, samples.reshape(-1, 3), "points")
         need = np.minimum(need, values.reshape(-1, 9).min(axis=1))
     return need
+
+
+def evaluated_size_function(function, points: np.ndarray, what: str) -> np.ndarray:
+    """The sizes (N,) float64 a size function gives at points (N, 3), or ParoctError in one
+    line if it fails or gives other than positive sizes, one a point; what names the points
+    in the message ("points", "points of the surface")."""
+    try:
+        values = np.asarray(function(points), dtype=np.float64)
+    except Exception as exc:  # the user's function failed: say so in one line
+        raise ParoctError(f"size_function failed on {points.shape[0]} {what}: {exc}") from None
+    if values.shape != (points.shape[0],):
+        raise ParoctError(f"size_function returned shape {values.shape} for {points.shape[0]} {what}; "
+                          f"expected ({points.shape[0]},)")
+    if not np.all(values > 0):
+        raise ParoctError("size_function returned a non-positive or NaN size")
+    return values
 
 
 #: size_seeds starts this many levels above max_size, so that pruning can skip whole regions.
