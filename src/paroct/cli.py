@@ -403,16 +403,11 @@ def _patch_lines(surface, labels: np.ndarray) -> list[str]:
 def _thin_places(surface, size: float) -> str:
     """The thinnest walls and gaps under 2 x size that the lattice rows at size find with their
     two sides facing squarely (those mesh() refines near, when the mesh at size loses them)."""
-    from . import rays
-    from .features import thin_features
-    from .frame import EDGE_DIRECTIONS, fat_frame
-    from .mesher import THIN_FACING
+    from .frame import fat_frame
+    from .mesher import THIN_FACING, surface_thin_features
 
     frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
-    snapped = rays.snap_surface(frame, surface.vertices)
-    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    crossings = {d: rays.row_crossings(frame, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
-    found, _ = thin_features(frame, crossings, surface.vertices, faces).facing_below(THIN_FACING).thinnest_below(2 * size)
+    found, _ = surface_thin_features(surface, frame).facing_below(THIN_FACING).thinnest_below(2 * size)
     if not found:
         return f"no wall or gap thinner than 2 x size = {2 * size:.4g} found along the lattice rows"
     return (f"thinner than 2 x size = {2 * size:.4g}: thinnest {', thinnest '.join(found)}; if a pass at this size "

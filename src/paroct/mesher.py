@@ -414,10 +414,7 @@ def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[Fea
         asks = merged_asks(asks, curvature_asks(surface, coarse, field.curvature, max_depth, DEFAULT_FEATURE_ANGLE,
                                                 cut))
     if field.layers is not None:
-        snapped = rays.snap_surface(coarse, surface.vertices)
-        faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-        crossings = {d: rays.row_crossings(coarse, snapped, faces, d) for d in range(EDGE_DIRECTIONS.shape[0])}
-        walls = find_thin_features(coarse, crossings, surface.vertices, faces).facing_below(THIN_FACING)
+        walls = surface_thin_features(surface, coarse).facing_below(THIN_FACING)
         asks = merged_asks(asks, wall_asks(walls, field.size, field.layers, max_depth))
     return asks, notes
 
@@ -803,10 +800,7 @@ def _walls_of_loss(surface: Surface, frame: FatFrame, snapped: np.ndarray, faces
     and the walls and gaps to refine near, measured in frame (snapped, faces: the surface in
     it; crossings: the row crossings by direction computed so far, completed here), with the
     parts the boundary missed.  ParoctError if the triangles near those cross others."""
-    for d in range(EDGE_DIRECTIONS.shape[0]):
-        if d not in crossings:
-            crossings[d] = rays.row_crossings(frame, snapped, faces, d)
-    features = find_thin_features(frame, crossings, surface.vertices, faces)
+    features = surface_thin_features(surface, frame, snapped, faces, crossings)
     advice = _thin_feature_advice(features, frame.h, surface)
     walls = features.facing_below(THIN_FACING)
     if _missed(report):
@@ -819,6 +813,20 @@ def _walls_of_loss(surface: Surface, frame: FatFrame, snapped: np.ndarray, faces
         _refuse_crossings(surface, np.flatnonzero(near))
         walls = _with_missed_parts(walls, frame, snapped, faces[near])
     return advice, walls
+
+
+def surface_thin_features(surface: Surface, frame: FatFrame, snapped: np.ndarray | None = None,
+                          faces: np.ndarray | None = None, crossings: dict | None = None) -> ThinFeatures:
+    """The walls and gaps the lattice rows of every direction measure (features.thin_features)
+    on the surface in frame; snapped, faces (int64) and crossings (the row crossings by
+    direction computed so far, completed in place) if the caller has them."""
+    snapped = rays.snap_surface(frame, surface.vertices) if snapped is None else snapped
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64) if faces is None else faces
+    crossings = {} if crossings is None else crossings
+    for d in range(EDGE_DIRECTIONS.shape[0]):
+        if d not in crossings:
+            crossings[d] = rays.row_crossings(frame, snapped, faces, d)
+    return find_thin_features(frame, crossings, surface.vertices, faces)
 
 
 def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:
