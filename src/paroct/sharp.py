@@ -79,9 +79,14 @@ def _meeting_vertices(vertex: np.ndarray, label: np.ndarray, at_least: int) -> n
     """The distinct vertices among vertex (K,) that come with at least at_least distinct labels (K,)."""
     width = np.int64(label.max(initial=0)) + 1
     owner = sorted_unique(vertex.astype(np.int64) * width + label) // width  # ascending, a run per vertex
-    first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if owner.size else np.zeros(0, dtype=np.int64)
-    counts = np.diff(np.r_[first, owner.size])
-    return owner[first[counts >= at_least]]
+    first, count = _runs(owner)
+    return owner[first[count >= at_least]]
+
+
+def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The start (R,) and length (R,) of each run of equal values in values (N,)."""
+    first = np.flatnonzero(np.r_[True, values[1:] != values[:-1]]) if values.size else np.zeros(0, dtype=np.int64)
+    return first, np.diff(np.r_[first, values.size])
 
 
 @dataclass(frozen=True)
@@ -107,8 +112,7 @@ def snap_to_features(points: np.ndarray, tets: np.ndarray, boundary: BoundaryPat
     # sorted_unique: np.unique hashed fea_part's 0.8 M (vertex, patch) keys at diag/40 in 24 ms.
     touching = sorted_unique(boundary.faces.astype(np.int64).ravel() * width + np.repeat(boundary.patches, 3))
     owner, patch = touching // width, (touching % width).astype(np.int32)
-    first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
-    count = np.diff(np.r_[first, owner.size])
+    first, count = _runs(owner)
     if not (count >= 2).any():  # no seam: a smooth part (a scan at 40 degrees), nothing to move
         return SnappedVertices(points, np.zeros(0, dtype=np.int64), 0)
     curves = feature_curves(surface, labels)
