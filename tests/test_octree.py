@@ -17,6 +17,7 @@ from paroct.octree import (
     tree_is_complete,
     tree_is_linear,
     unique_level_keys,
+    written_slots,
 )
 
 ML = octant.MAX_LEVEL
@@ -235,3 +236,15 @@ def test_unique_level_keys_by_bitmap_or_sort_are_the_set_of_keys(seed):
         rng.shuffle(keys)
         got = unique_level_keys(keys, level)
         assert got.dtype == np.int64 and got.tolist() == sorted(set(keys.tolist()))
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 500])
+def test_written_slots_are_each_runs_slots_in_order(n):
+    """written_slots: counts[f] slots from offsets[f] on, run after run, as numpy's
+    concatenated aranges (runs of zero length and a gap after each)."""
+    rng = np.random.default_rng(n)
+    capacity = rng.integers(0, 6, n)
+    offsets = np.concatenate([[0], np.cumsum(capacity)])[:n].astype(np.int64)
+    counts = (capacity * rng.random(n)).astype(np.int64)
+    want = np.concatenate([np.arange(o, o + c) for o, c in zip(offsets, counts)] + [np.zeros(0, dtype=np.int64)])
+    assert np.array_equal(written_slots(offsets, counts), want)

@@ -750,3 +750,13 @@ def test_cut_edges_and_warps_do_not_depend_on_the_numbering(seed):
     again = cut_and_warp(moved, perm[tets][rng.permutation(tets.shape[0])].astype(np.int32), moved_spacing)
     assert edges == again[0] and warped == again[1]
     assert len(edges) > 100 and len(warped) > 20 and off_lattice > 0 and ties  # the rules are exercised
+
+
+@pytest.mark.parametrize("n_rows, width", [(0, 4), (1, 4), (300, 8), (5000, 4)])
+def test_mixed_rows_are_rows_of_both_classes(n_rows, width):
+    """mixed_rows against numpy: a row is mixed iff its vertices' classes are not all equal."""
+    rng = np.random.default_rng(n_rows)
+    classes = rng.random(40) < 0.5
+    ids = rng.integers(0, 40, (n_rows, width)).astype(np.int32)
+    want = classes[ids].any(axis=1) & ~classes[ids].all(axis=1)
+    assert np.array_equal(stuffing.mixed_rows(ids, classes), want)

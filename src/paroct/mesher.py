@@ -904,7 +904,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     return MeshResult(mesh, report, surface, faces_out, point_faces)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _point_faces(targets, cut_faces, new_id, n_points):
     """The surface triangle (n_points,) int32 each point of the compacted mesh lies on: stuffed
     point p (lattice vertices, targets (V,), then cut points, cut_faces (E,)) is point
@@ -912,7 +912,7 @@ def _point_faces(targets, cut_faces, new_id, n_points):
     warp; a cut point on its own."""
     faces = np.empty(n_points, dtype=np.int32)
     n = targets.shape[0]
-    for p in range(new_id.shape[0]):
+    for p in nb.prange(new_id.shape[0]):
         q = new_id[p]
         if q >= 0:
             faces[q] = cut_faces[p - n] if p >= n else (cut_faces[targets[p]] if targets[p] >= 0 else -1)
@@ -1297,18 +1297,34 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     return np.compress(keep, keys), np.compress(keep, levels), BandStuffing(cut_cells.coords, inside, cuts, targets)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _cells_around(coords, marked, shift):
     """Octree keys (K,) of the unit cells around the marked lattice points (coords (V, 3)):
-    the 8 cells with the point as a corner, those of non-negative anchor, with repeats;
-    anchors shifted left by ``shift`` (to octree coordinates) before keying.  (numpy's
-    broadcast, filter and keying took 3 ms on plate_holes diag/80.)"""
-    n = 0
-    for v in range(coords.shape[0]):
-        n += marked[v]
-    out = np.empty(8 * n, dtype=np.int64)
-    k = 0
-    for v in range(coords.shape[0]):
+    the 8 cells with the point as a corner, those of non-negative anchor, with repeats, in
+    point order; anchors shifted left by ``shift`` (to octree coordinates) before keying.
+    Count, prefix sum and fill over chunks of the points.  (numpy's broadcast, filter and
+    keying took 3 ms on plate_holes diag/80.)"""
+    n_points = coords.shape[0]
+    n_chunks = min(n_points, POINT_CHUNKS)
+    starts = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        starts[c + 1] = _cells_around_chunk(coords, marked, shift, c * n_points // n_chunks,
+                                            (c + 1) * n_points // n_chunks, starts[:0], 0)
+    for c in range(n_chunks):
+        starts[c + 1] += starts[c]
+    out = np.empty(starts[n_chunks], dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        _cells_around_chunk(coords, marked, shift, c * n_points // n_chunks, (c + 1) * n_points // n_chunks, out,
+                            starts[c])
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def _cells_around_chunk(coords, marked, shift, first, end, out, k):
+    """_cells_around for points first..end-1: writes their keys to out from k on unless out is
+    empty (counting only); returns how many."""
+    start = k
+    for v in range(first, end):
         if not marked[v]:
             continue
         for c in range(8):
@@ -1316,9 +1332,10 @@ def _cells_around(coords, marked, shift):
             y = coords[v, 1] - CUBE_CORNERS[c, 1]
             z = coords[v, 2] - CUBE_CORNERS[c, 2]
             if x >= 0 and y >= 0 and z >= 0:
-                out[k] = morton_key(x << shift, y << shift, z << shift)
+                if out.shape[0]:
+                    out[k] = morton_key(x << shift, y << shift, z << shift)
                 k += 1
-    return out[:k]
+    return k - start
 
 
 def vertex_classes(vertices: LeafVertices, band_inside: np.ndarray) -> np.ndarray:
@@ -1483,18 +1500,35 @@ def _compact(points, tets):
     return np.compress(new_id >= 0, points, axis=0), tets, new_id  # compress: 3x a boolean index
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _used_ids(tets, n_points):
     """New id (n_points,) int32 of each point that a tet uses, numbered in point order; -1 for
-    the others."""
-    used = used_vertices(tets, n_points)
-    new_id = np.full(n_points, -1, dtype=np.int32)
-    n = 0
-    for v in range(n_points):
-        if used[v]:
-            new_id[v] = n
-            n += 1
+    the others.  Marks in parallel (every thread writes True), then counts, prefix-sums and
+    fills over chunks of the points (serial, 0.28 ms of bunny's 160 k tets at diag/80; 0.12)."""
+    used = np.zeros(n_points, dtype=np.bool_)
+    for t in nb.prange(tets.shape[0]):
+        for k in range(tets.shape[1]):
+            used[tets[t, k]] = True
+    n_chunks = min(n_points, POINT_CHUNKS)
+    starts = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        count = 0
+        for v in range(c * n_points // n_chunks, (c + 1) * n_points // n_chunks):
+            count += used[v]
+        starts[c + 1] = count
+    for c in range(n_chunks):
+        starts[c + 1] += starts[c]
+    new_id = np.empty(n_points, dtype=np.int32)
+    for c in nb.prange(n_chunks):
+        n = starts[c]
+        for v in range(c * n_points // n_chunks, (c + 1) * n_points // n_chunks):
+            new_id[v] = n if used[v] else -1
+            n += used[v]
     return new_id
+
+
+#: Chunks of the points that _used_ids counts and fills in parallel.
+POINT_CHUNKS = 64
 
 
 @nb.njit(cache=True, parallel=True)

@@ -361,16 +361,18 @@ def _surface_cell_hits(snapped, faces, snap_bits, cell_bits, offsets, keys, key_
                 counts[f] = m - start
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def written_slots(offsets, counts):
     """Indices (sum counts,) of the slots a count-and-fill kernel wrote: counts[f] of them from
     offsets[f] on, in order."""
-    out = np.empty(counts.sum(), dtype=np.int64)
-    m = 0
+    starts = np.empty(counts.shape[0] + 1, dtype=np.int64)
+    starts[0] = 0
     for f in range(counts.shape[0]):
-        for k in range(offsets[f], offsets[f] + counts[f]):
-            out[m] = k
-            m += 1
+        starts[f + 1] = starts[f] + counts[f]
+    out = np.empty(starts[-1], dtype=np.int64)
+    for f in nb.prange(counts.shape[0]):
+        for k in range(counts[f]):
+            out[starts[f] + k] = offsets[f] + k
     return out
 
 

@@ -49,12 +49,12 @@ def _is_mixed(ids, i, classes):
     return False
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def mixed_rows(ids, classes):
     """Mask (N,) of the rows of vertex ids (N, K) (tets, cells' corners) whose vertices are
     not all of one class."""
     out = np.empty(ids.shape[0], dtype=np.bool_)
-    for i in range(ids.shape[0]):
+    for i in nb.prange(ids.shape[0]):
         out[i] = _is_mixed(ids, i, classes)
     return out
 
