@@ -240,6 +240,9 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", s, "--refine-sphere", "0", "0", "0", "1", "-1"], "region size = -1"),
         (lambda t, s: ["mesh", s, "--refine-box", "1", "1", "1", "0", "0", "0", "0.1"], "is not below"),
         (lambda t, s: ["mesh", s, "--min-size", "0"], "min_size = 0"),
+        (lambda t, s: ["mesh", s, "--threads", "0"], r"--threads 0: must be from 1 to \d+"),
+        (lambda t, s: ["mesh", s, "--threads", "100000"], r"--threads 100000: must be from 1 to \d+"),
+        (lambda t, s: ["mesh", s, "--threads", "1.5"], "invalid int value: '1.5'"),
         (lambda t, s: ["mesh"], "required: SURFACE"),
         (lambda t, s: [], "choose a command"),
         (lambda t, s: ["frobnicate"], "invalid choice"),
@@ -331,3 +334,16 @@ def test_grading_options_change_the_mesh(tmp_path, capsys):
         assert (levels == 1) == (name == "uniform")
     assert counts["uniform"] > counts["graded"] > 0
     assert counts["sphere"] > counts["coarse"]
+
+
+def test_threads_give_the_same_file_and_leave_numbas_count_as_it_was(tmp_path, capsys):
+    """--threads 1 writes the same bytes as every thread (the kernels' chunks do not depend on
+    the thread count), and main() restores numba's thread count for the process after."""
+    import numba
+
+    before = numba.get_num_threads()
+    stl = DATA / "angle_block.stl"
+    assert _run(capsys, "mesh", stl, "-o", tmp_path / "all.msh", "--patches")[0] == 0
+    assert _run(capsys, "mesh", stl, "-o", tmp_path / "one.msh", "--patches", "--threads", "1")[0] == 0
+    assert numba.get_num_threads() == before
+    assert (tmp_path / "one.msh").read_bytes() == (tmp_path / "all.msh").read_bytes()

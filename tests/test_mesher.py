@@ -721,3 +721,33 @@ def test_a_surface_overlapping_itself_is_refused_where_it_does():
     assert distances_to_triangles(point[None], vertices, faces)[0] < 1e-5 * surface.diagonal
     angle = np.arctan2(point[1], point[0]) % (2 * np.pi)
     assert angle < 2 * np.pi * 1.0 / 7 + 0.3 or angle > 2 * np.pi - 0.3  # where the ends meet, near angle 0
+
+
+def test_the_mesh_does_not_depend_on_the_thread_count():
+    """Test suites need the same mesh on every machine: the parallel kernels split their work
+    into chunks of a fixed count and write disjoint outputs, so one thread gives the same
+    points, tets, boundary and tags as every thread, through the thin-feature rounds (the fin
+    refines locally and mends warps), the sharp edges and the patches."""
+    import numba
+
+    def everything():
+        result = mesh(_FIN_PART.rotate([17, 29, 41]), size=0.1)
+        sharp = result.with_sharp_edges()
+        return (result.mesh.points, result.mesh.tets, result.boundary_faces, result.point_faces,
+                sharp.mesh.points, result.boundary_patches().patches, result.report.notes)
+
+    threads = numba.get_num_threads()
+    if threads < 2:
+        pytest.skip("numba has one thread here: nothing to compare")
+    every = everything()
+    try:
+        numba.set_num_threads(1)
+        one = everything()
+    finally:
+        numba.set_num_threads(threads)
+    assert "near the" in " ".join(every[-1])  # the rounds near thin places ran
+    for a, b in zip(every, one):
+        if isinstance(a, np.ndarray):
+            np.testing.assert_array_equal(a, b)
+        else:
+            assert a == b

@@ -7,6 +7,7 @@ printed as one line ``paroct: error: ...``; 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import re
@@ -116,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{DEFAULT_FEATURE_ANGLE:g} degrees; with ANGLE, split at ANGLE degrees)")
     m.add_argument("--max-memory", type=float, metavar="GIB",
                    help="refuse sizes needing more than this many GiB (default: the available memory)")
+    m.add_argument("--threads", type=int, metavar="N",
+                   help="threads to mesh with (default: every CPU); the mesh is the same with any number.  Give 1 to "
+                        "each of several paroct runs at once: their threads would otherwise wait on each other")
     talk = m.add_mutually_exclusive_group()
     talk.add_argument("-v", "--verbose", action="store_true", help="report each stage as it ends, stage times and peak memory")
     talk.add_argument("-q", "--quiet", action="store_true", help="no summary (warnings and errors still go to stderr)")
@@ -179,11 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run_mesh(args: argparse.Namespace) -> int:
-    from .io import output_format, write_mesh
-    from .memory import peak_resident, start_peak_count
-    from .mesher import mesh, resolve_size
-    from .sizing import Box, Sphere
-    from .surface import load_surface
+    from .io import output_format
 
     source = Path(args.surface)
     out = Path(args.output) if args.output else Path.cwd() / (source.stem + ".vtu")
@@ -200,6 +200,38 @@ def _run_mesh(args: argparse.Namespace) -> int:
         if not (math.isfinite(args.max_memory) and args.max_memory > 0):
             raise ParoctError(f"--max-memory {args.max_memory}: must be a positive number of GiB")
         max_memory = int(args.max_memory * 2**30)
+
+    with _threads(args.threads):
+        return _mesh_and_write(args, source, out, patch_sizes, max_memory)
+
+
+@contextlib.contextmanager
+def _threads(n: int | None):
+    """Run the block with numba's thread count at n (None: as it is), restored after: main()
+    may be called in a process that goes on (the tests)."""
+    import numba
+
+    if n is None:
+        yield
+        return
+    most = numba.config.NUMBA_NUM_THREADS
+    if not 1 <= n <= most:
+        raise ParoctError(f"--threads {n}: must be from 1 to {most}, the CPUs numba starts threads for "
+                          "(the environment variable NUMBA_NUM_THREADS sets that)")
+    before = numba.get_num_threads()
+    numba.set_num_threads(n)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_sizes, max_memory) -> int:
+    from .io import write_mesh
+    from .memory import peak_resident, start_peak_count
+    from .mesher import mesh, resolve_size
+    from .sizing import Box, Sphere
+    from .surface import load_surface
 
     def progress(stage: str) -> None:
         _err(f"{stage} done")
