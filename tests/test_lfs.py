@@ -130,6 +130,21 @@ def test_a_sphere_asks_the_levels_its_radius_needs(per_turn):
     assert deepest.shape[0] == met.shape[0]  # every cell the sphere meets
 
 
+@pytest.mark.parametrize("per_turn", [200, 1000, 1e6])
+def test_more_elements_a_turn_than_the_facets_turn_still_refine(per_turn):
+    """The sphere's facets turn about 2.8 degrees, more than 360 / N here: split at 360 / N,
+    each facet was a flat patch of its own and nothing was asked (the fuzzing of session 42:
+    bunny's tets fell from 478 k at N = 32 to 30 k at N = 1e5).  The split stays at
+    MIN_CURVATURE_SPLIT: the sphere asks the deepest level allowed, everywhere."""
+    surface = load_surface(manifold3d.Manifold.sphere(2.0, 128))
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, 1.0)
+    asks = curvature_asks(surface, frame, per_turn, 4, 40.0)
+    assert int(asks.depth.max()) == 4
+    deepest = np.unique(np.floor(frame.to_lattice(asks.points[asks.depth == 4])).astype(np.int64), axis=0)
+    met = cells_met(frame, triangle_pieces(surface.vertices[surface.faces], 0.25)[0])
+    assert deepest.shape[0] == met.shape[0]
+
+
 def _ridge(angle: float) -> manifold3d.Manifold:
     """A 10 x 10 prism whose top turns by ``angle`` degrees along a ridge (a crease)."""
     rise = 5 * math.tan(math.radians(angle / 2))

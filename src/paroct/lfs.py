@@ -105,6 +105,23 @@ def surface_pieces(surface: Surface, frame: FatFrame) -> SurfacePieces:
     return SurfacePieces(corners, owner, np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 3))
 
 
+#: Degrees below which curvature_asks splits no patch, however many elements a turn asks:
+#: smooth surfaces are tessellated with facets turning a few degrees each, and splitting
+#: there (360 / N for N = 1000 is 0.36) cut them into patches of one facet, flat, so a larger
+#: N refined less, and a large enough one nothing (bunny at diag/10: N = 32, 128, 1000, 1e5
+#: gave 478 k, 304 k, 139 k, 30 k tets, the last as without curvature).  10 degrees is
+#: 360 / 36: N up to 36 split as before.
+MIN_CURVATURE_SPLIT = 10.0
+
+
+def curvature_split_angle(feature_angle: float, per_turn: float) -> float:
+    """Degrees at which curvature_asks splits the surface into patches measured apart: the
+    feature angle, or the turn of one element, 360 / per_turn, if smaller (an edge turning
+    more than an element may is an edge of the part, not curvature), but not below
+    MIN_CURVATURE_SPLIT (so more elements a turn never ask fewer)."""
+    return min(feature_angle, max(360 / per_turn, MIN_CURVATURE_SPLIT))
+
+
 #: A bend measured at one scale is resolved by finer elements only if it shrinks when measured
 #: at half the scale (a fillet's bend per cell halves; a crease's, one edge of the
 #: triangulation, stays): the finer cells' bend must be below this fraction of the coarser's.
@@ -123,16 +140,16 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
     cell that bent too much asks one level finer if every finer cell of its pieces bends less
     than SHRINKS times it, and the finer cells of those that still bend too much are measured
     again, down to max_depth.  A bend that does not shrink is a crease of the triangulation,
-    which no element size resolves.  Each patch of the surface split at feature_angle, or at
-    360 / per_turn degrees if smaller (boundary.surface_patches), is measured apart: an edge
-    turning more than one element may is an edge of the part, not curvature.  cut: the surface
+    which no element size resolves.  Each patch of the surface split at
+    curvature_split_angle (boundary.surface_patches) is measured apart: an edge turning more
+    than one element may is an edge of the part, not curvature.  cut: the surface
     cut to frame.h (surface_pieces), if it already is."""
     if max_depth < 1:
         return no_asks()
     vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     normals = face_normals(vertices, faces)
-    patches = surface_patches(surface, min(feature_angle, 360 / per_turn))
+    patches = surface_patches(surface, curvature_split_angle(feature_angle, per_turn))
     limit = 2 * np.pi / per_turn
     cut = surface_pieces(surface, frame) if cut is None else cut
     pieces, owner = cut.corners, cut.owner
