@@ -84,9 +84,15 @@ def regular_file(path: Path, what: str) -> None:
 
 
 def _text(data: bytes) -> str:
-    """The file as text: a UTF-8 byte-order mark dropped, bytes above 127 kept as Latin-1
-    (names and comments may hold any)."""
-    return data[3:].decode("latin-1") if data.startswith(b"\xef\xbb\xbf") else data.decode("latin-1")
+    """The file as text: UTF-8 (a byte-order mark dropped), as CAD programs write names
+    today; a file that is not valid UTF-8 as Latin-1, every byte a character (names and
+    comments of older files may hold any)."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
 
 
 def _numbers(tokens, dtype, what: str) -> np.ndarray:
