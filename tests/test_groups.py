@@ -4,6 +4,8 @@ boundary patches."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import manifold3d
 import meshio
 import numpy as np
@@ -12,7 +14,7 @@ import pytest
 import paroct
 from paroct import ParoctError, boundary_patches, load_surface
 from paroct.cli import main
-from paroct.io import _abaqus_names, write_mesh
+from paroct.io import _abaqus_names, _gmsh_names, write_mesh
 from paroct.readers import read_surface_file
 from paroct.surface import Surface, surface_from_arrays
 
@@ -116,6 +118,22 @@ def test_obj_groups(tmp_path, text, names, groups):
     assert (read.face_groups is None) if groups is None else np.array_equal(read.face_groups, groups)
 
 
+@pytest.mark.parametrize("encoding, bom", [("utf-8", b""), ("utf-8", b"\xef\xbb\xbf"), ("latin-1", b"")])
+def test_group_names_keep_their_characters(tmp_path, encoding, bom):
+    """Names are read as UTF-8 (with or without a byte-order mark), as CAD programs write them;
+    a file that is not UTF-8 as Latin-1 (it once read every file so: "ñandú" became "Ã±andÃº")."""
+    names = ["ñandú", "Größe", "façade", "x", "y", "z"] if encoding == "latin-1" else ["ñandú", "Wärme 😀", "面", "x", "y", "z"]
+    path = tmp_path / "box.stl"
+    path.write_bytes(bom + "".join(_stl_solid(n, f) for n, f in zip(names, SIDE_FACES)).encode(encoding))
+    assert read_surface_file(path).group_names == tuple(names)
+    obj = tmp_path / "box.obj"
+    text = "".join(f"v {x:g} {y:g} {z:g}\n" for x, y, z in BOX_V)
+    text += "".join(f"g {n}\nf {a + 1} {b + 1} {c + 1}\nf {d + 1} {e + 1} {g + 1}\n"
+                    for n, ((a, b, c), (d, e, g)) in zip(names, SIDE_FACES))
+    obj.write_bytes(bom + text.encode(encoding))
+    assert read_surface_file(obj).group_names == tuple(names)
+
+
 def test_stl_solid_names_as_found(tmp_path):
     """Upper-case keywords, CRLF line ends, a solid with no name (solid_<k>), a name used twice
     (one group); one solid alone is no group."""
@@ -197,6 +215,25 @@ def test_abaqus_names_are_valid_and_distinct():
     assert names[:3] == ["INLET_WALL", "INLET_WALL_2", "P_3D"] and names[5] == "X_Y"
     assert len(set(names)) == len(names)
     assert all(len(n) <= 77 and n[0].isalpha() and n.replace("_", "").isalnum() for n in names)
+
+
+def test_gmsh_names_read_back_distinct(tmp_path, named_box):
+    """Names that ended a .msh name's quotes (a quote, a backslash: meshio splits the line as a
+    shell would), a tab, 300 characters (Gmsh 4.15 dropped every physical group), two equal
+    after the cut, and "solid" (the volume's): each patch's group comes back under its own
+    name, within _GMSH_NAME_BYTES bytes of UTF-8."""
+    _, result = named_box
+    odd = ('c\\"d', "tab\there", "é" * 300, "é" * 300 + "x", "solid", "top")
+    names = _gmsh_names(odd)
+    assert names[:2] == ["c__d", "tab_here"] and names[4] == "solid_5" and names[5] == "top"
+    assert len(set(names)) == 6 and all(len(n.encode()) <= 128 for n in names)
+    patches = result.boundary_patches()
+    patches = dataclasses.replace(patches, names=odd)
+    msh = tmp_path / "odd.msh"
+    write_mesh(msh, result.mesh.points, result.mesh.tets, boundary=patches)
+    back = meshio.read(msh)
+    assert {name: tuple(v) for name, v in back.field_data.items()} == {
+        "solid": (1, 3), **{name: (p, 2) for p, name in enumerate(names, start=1)}}
 
 
 def test_cli_lists_the_named_patches(tmp_path, named_box, capsys):

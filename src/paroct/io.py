@@ -335,6 +335,33 @@ def _abaqus_names(names: tuple[str, ...]) -> list[str]:
     return out
 
 
+#: Bytes (UTF-8) of a physical name in the .msh files paroct writes: Gmsh 4.15 failed to
+#: open a file with a name of 253 characters and dropped every physical group at 254 or more.
+_GMSH_NAME_BYTES = 128
+
+
+def _gmsh_names(names: tuple[str, ...]) -> list[str]:
+    """The patches' names as Gmsh and meshio read them back: a quoted string on one line, so
+    quotes, backslashes (meshio splits the line as a shell would) and control characters
+    become ``_``; cut to _GMSH_NAME_BYTES bytes of UTF-8 (whole characters), and one
+    already taken (or "solid", the volume's) gets ``_<p>`` (its patch) after it."""
+    out, taken = [], {"solid"}
+    for p, name in enumerate(names, start=1):
+        name = _utf8_prefix(re.sub(r'["\\\x00-\x1f\x7f]', "_", name), _GMSH_NAME_BYTES)
+        base, k = name, 1
+        while name in taken:
+            tail = f"_{p}" if k == 1 else f"_{p}_{k}"
+            name, k = _utf8_prefix(base, _GMSH_NAME_BYTES - len(tail)) + tail, k + 1
+        taken.add(name)
+        out.append(name)
+    return out
+
+
+def _utf8_prefix(text: str, n_bytes: int) -> str:
+    """The longest prefix of text whose UTF-8 takes at most n_bytes bytes."""
+    return text.encode("utf-8")[:n_bytes].decode("utf-8", errors="ignore")
+
+
 def _write_id_lines(out, ids: np.ndarray) -> None:
     """0-based ids (K,) as 1-based Abaqus data lines of _ABAQUS_IDS_PER_LINE ids each."""
     full = len(ids) - len(ids) % _ABAQUS_IDS_PER_LINE
@@ -380,9 +407,8 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
     patch_faces = [] if boundary is None else [boundary.faces[on] for on in boundary.by_patch()]
     with open(path, "wb") as out:
         out.write(b"$MeshFormat\n4.1 1 8\n" + ints([1]) + b"\n$EndMeshFormat\n")
-        # A name is a quoted string on one line: quotes and control characters would end it.
-        names = [(3, 1, "solid")] + [(2, p, re.sub(r'["\x00-\x1f]', "_", name))
-                                     for p, name in enumerate(() if boundary is None else boundary.names, start=1)]
+        names = [(3, 1, "solid")] + [(2, p, name) for p, name in
+                                     enumerate(_gmsh_names(() if boundary is None else boundary.names), start=1)]
         out.write(f"$PhysicalNames\n{len(names)}\n".encode())
         out.write("".join(f'{dim} {tag} "{name}"\n' for dim, tag, name in names).encode() + b"$EndPhysicalNames\n")
         # Entities: surfaces (tag, box, physical tags, bounding curves), then the volume
