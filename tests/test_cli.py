@@ -1,5 +1,6 @@
 """The paroct command: mesh -> file -> check round trip, exit codes, one-line errors."""
 
+import importlib.util
 import re
 import subprocess
 import sys
@@ -174,8 +175,16 @@ def test_bad_output_is_refused_before_meshing(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(paroct.mesher, "mesh", never)
     stl = _write_surface(tmp_path / "box.stl")
-    for out, match in [("out.xyz", "unknown mesh format"), ("out.stl", "surfaces only"), ("no/such/out.vtu", "does not exist")]:
+    (tmp_path / "folder.vtu").mkdir()
+    for out, match in [("out.xyz", "unknown mesh format"), ("out.stl", "surfaces only"), ("no/such/out.vtu", "does not exist"),
+                       ("folder.vtu", "is a folder")]:
         _assert_one_line_error(*_run(capsys, "mesh", stl, "-o", tmp_path / out), match)
+    _assert_one_line_error(*_run(capsys, "mesh", stl, "-o", tmp_path / "out.node", "--patches"), "hold no boundary patches")
+    _assert_one_line_error(*_run(capsys, "mesh", stl, "-o", ""), "-o '': give a file name")
+    missing = next((ext for ext, fmt in [(".xdmf", "h5py"), (".med", "h5py"), (".exo", "netCDF4")]
+                    if importlib.util.find_spec(fmt) is None), None)
+    if missing:  # a writer's package, asked for before meshing
+        _assert_one_line_error(*_run(capsys, "mesh", stl, "-o", tmp_path / f"out{missing}"), "needs the package")
 
 
 def _written(path, data: bytes):

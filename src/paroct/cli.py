@@ -183,18 +183,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run_mesh(args: argparse.Namespace) -> int:
-    from .io import output_format
+    from .io import checked_output
 
     source = Path(args.surface)
+    if args.output == "":
+        raise ParoctError("-o '': give a file name (or leave -o out for the surface's name with .vtu)")
     out = Path(args.output) if args.output else Path.cwd() / (source.stem + ".vtu")
     # Refuse a bad output or feature angle before spending the meshing time.
-    output_format(out)
+    checked_output(out, boundary=args.patches is not None)
     for angle in (args.patches, args.sharp_edges):
         if angle is not None and angle is not _INPUT_GROUPS:
             checked_feature_angle(angle)
     patch_sizes = _sizing_options(args)
-    if not out.parent.is_dir():
-        raise ParoctError(f"{out}: folder {out.parent} does not exist")
     max_memory = None
     if args.max_memory is not None:
         if not (math.isfinite(args.max_memory) and args.max_memory > 0):

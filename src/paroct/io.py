@@ -63,6 +63,31 @@ def output_format(path: str | os.PathLike) -> tuple[str, dict]:
     return formats[0], {}
 
 
+#: Python packages meshio's writer of a format imports, asked for before any work.
+_WRITER_PACKAGES = {"xdmf": "h5py", "med": "h5py", "h5m": "h5py", "hmf": "h5py", "cgns": "h5py", "exodus": "netCDF4"}
+
+
+def checked_output(path: str | os.PathLike, boundary: bool = False) -> tuple[str, dict]:
+    """output_format's (format, options) once everything about the output that can be known
+    before meshing is right: ParoctError if the format holds no tets (or no boundary patches,
+    when boundary), needs a package that is not installed, or the path is a folder or in a
+    folder that does not exist."""
+    import importlib.util
+
+    path = Path(path)
+    fmt, options = output_format(path)
+    if boundary and fmt not in _BOUNDARY_FORMATS:
+        raise ParoctError(f"{path}: {fmt} files hold no boundary patches here; write .msh, .inp, .mesh, .vtu or .vtk")
+    package = _WRITER_PACKAGES.get(fmt)
+    if package and importlib.util.find_spec(package) is None:
+        raise ParoctError(f"{path}: writing {fmt} needs the package {package}, not installed; install it or write .vtu")
+    if path.is_dir():
+        raise ParoctError(f"{path}: is a folder; give a file name")
+    if path.parent and not path.parent.is_dir():
+        raise ParoctError(f"{path}: folder {path.parent} does not exist")
+    return fmt, options
+
+
 def write_mesh(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, cell_data: dict | None = None,
                boundary: BoundaryPatches | None = None) -> None:
     """Write a tet mesh; the format follows the extension (binary where the format allows).
@@ -81,16 +106,12 @@ def write_mesh(path: str | os.PathLike, points: np.ndarray, tets: np.ndarray, ce
     if not isinstance(path, (str, os.PathLike)):
         raise ParoctError(f"path = {path!r}: give a file name (str or pathlib.Path)")
     path = Path(path)
-    fmt, options = output_format(path)
-    if path.parent and not path.parent.exists():
-        raise ParoctError(f"{path}: folder {path.parent} does not exist")
+    fmt, options = checked_output(path, boundary is not None)
     points, tets, cell_data = _checked(points, tets, cell_data)
     if cell_data and fmt not in _CELL_DATA_FORMATS:
         raise ParoctError(f"{path}: {fmt} files hold no cell data here; write .vtu, .vtk, .msh or .xdmf")
     if boundary is not None:
         _check_boundary(boundary, points, tets, cell_data)
-        if fmt not in _BOUNDARY_FORMATS:
-            raise ParoctError(f"{path}: {fmt} files hold no boundary patches here; write .msh, .inp, .mesh, .vtu or .vtk")
     try:
         if fmt == "vtu":
             _write_vtu(path, points, tets, *_with_triangles(tets, cell_data, boundary))
