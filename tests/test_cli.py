@@ -247,7 +247,7 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", s, "--max-size", "1e-9"], "max_size = 1e-09 must be at least size"),
         (lambda t, s: ["mesh", s, "--max-size", "2", "--uniform"], "not allowed with"),
         (lambda t, s: ["mesh", s, "--refine-sphere", "0", "0", "0", "1", "-1"], "region size = -1"),
-        (lambda t, s: ["mesh", s, "--refine-box", "1", "1", "1", "0", "0", "0", "0.1"], "is not below"),
+        (lambda t, s: ["mesh", s, "--refine-box", "1", "1", "1", "0", "0", "0", "0.1"], "exceeds hi"),
         (lambda t, s: ["mesh", s, "--min-size", "0"], "min_size = 0"),
         (lambda t, s: ["mesh", s, "--threads", "0"], r"--threads 0: must be from 1 to \d+"),
         (lambda t, s: ["mesh", s, "--threads", "100000"], r"--threads 100000: must be from 1 to \d+"),

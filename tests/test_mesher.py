@@ -410,6 +410,9 @@ def test_size_checks():
     (dict(divisions=12, regions=[paroct.Sphere((0, 0, 0), "1", 1)]), r"refinement sphere radius = '1'"),
     (dict(divisions=12, regions=[paroct.Sphere((np.nan, 0, 0), 1, 1)]), r"refinement sphere center = \(nan, 0, 0\)"),
     (dict(divisions=12, progress=1), r"progress = 1: must be a function"),
+    (dict(size=0.1, divisions=8), r"size = 0.1 and divisions = 8: give one"),
+    (dict(divisions=12, thin_features="no"), r"thin_features = 'no': must be True or False"),
+    (dict(divisions=12, regions=[paroct.Box((0, 0, 1), (1, 1, 0), 1)]), r"lo = \(0, 0, 1\) exceeds hi = \(1, 1, 0\)"),
 ])
 def test_options_of_the_wrong_kind_are_refused_by_name(options, match):
     """Every option is checked before any work, and a wrong one named in a ParoctError (not a
@@ -751,3 +754,18 @@ def test_the_mesh_does_not_depend_on_the_thread_count():
             np.testing.assert_array_equal(a, b)
         else:
             assert a == b
+
+
+def test_an_infinite_size_asks_nothing_there():
+    """size_function may say "no bound" with inf: no refinement there and no numpy warning
+    (log2 of 0 once leaked one), the finite part refined as asked."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), size=0.25,
+                      size_function=lambda x: np.where(x[:, 0] < 0.5, np.inf, 0.1))
+    edges = np.linalg.norm(result.mesh.points[result.boundary_faces] - result.mesh.points[np.roll(result.boundary_faces, 1, axis=1)], axis=2)
+    centres = result.mesh.points[result.boundary_faces].mean(axis=1)
+    assert edges.max(axis=1)[centres[:, 0] > 0.75].max() < 0.25 * 0.75  # refined where the function bounds
+    assert edges.max(axis=1)[centres[:, 0] < 0.25].max() > 0.25 * 0.75  # size where it is inf

@@ -652,7 +652,10 @@ def function_asks(surface: Surface, frame: FatFrame, function, max_depth: int,
     cut = surface_pieces(surface, frame) if cut is None else cut
     pieces, probes = cut.corners, cut.probes
     wanted = evaluated_size_function(function, probes, "points of the surface").reshape(-1, 4).min(axis=1)
-    levels = np.minimum(np.ceil(np.log2(frame.h / wanted) - 1e-9), max_depth).astype(np.int64)
+    # Sizes of size or more (an infinite size: no bound there) ask nothing; the others 1..max_depth levels.
+    levels = np.zeros(wanted.shape[0], dtype=np.int64)
+    below = wanted < frame.h
+    levels[below] = np.minimum(np.ceil(np.log2(frame.h / wanted[below]) - 1e-9), max_depth)
     asked = [(pieces[levels == level], level) for level in np.unique(levels[levels > 0]).tolist()]
     if not asked:
         return no_asks(), []

@@ -311,6 +311,10 @@ def mesh(
     any work.  progress: called with each stage's name when it ends.
     """
     t0 = time.perf_counter()
+    if size is not None and divisions is not None:
+        raise ParoctError(f"size = {size!r} and divisions = {divisions!r}: give one (size = diagonal / divisions)")
+    if not isinstance(thin_features, (bool, np.bool_)):
+        raise ParoctError(f"thin_features = {thin_features!r}: must be True or False")
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function, curvature, layers, patch_sizes)

@@ -124,7 +124,7 @@ def size_field(size: float, max_size: float | None = None, regions: Sequence[Reg
         positive_number("refinement region size", r.size)
         if isinstance(r, Box):
             if not np.all(_point("refinement box lo", r.lo) <= _point("refinement box hi", r.hi)):
-                raise ParoctError(f"refinement box lo = {r.lo} is not below hi = {r.hi}")
+                raise ParoctError(f"refinement box lo = {r.lo} exceeds hi = {r.hi} in a coordinate (lo must be at most hi)")
         else:
             _point("refinement sphere center", r.center)
             if r.radius != 0:
