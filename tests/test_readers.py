@@ -160,6 +160,16 @@ def _head(fmt: str, n_faces: int, count: str = "uchar") -> bytes:
     ("x.ply", _head("ascii", 1) + b"0 0 0\n1 0 0\n0 1 0\n-1 0 1 2\n", r"a face list of -1 items"),
     ("x.ply", _head("binary_little_endian", 1, "uint") + bytes(36) + b"\xff\xff\xff\xff" + bytes(12),
      r"a face list of 4294967295 items runs past the end of the file"),
+    # Python reads '1_0' as 10 and int(1.7) as 1; a file means neither (session 42's fuzzing)
+    ("x.obj", b"v 1_0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", r"a vertex coordinate '1_0' is not a number"),
+    ("x.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0_3\n", r"line 4 reads 'f 1 2 0_3': a corner is not a vertex index"),
+    ("x.off", b"OFF\n3 1 0\n0 0 0\n1_0 0 0\n0 1 0\n3 0 1 2\n", r"a vertex coordinate '1_0' is not a number"),
+    ("x.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 0_2\n", r"a face line reads '3 0 1 0_2'"),
+    ("x.stl", b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1_0 0 0\nvertex 0 1 0\nendloop\n"
+              b"endfacet\nendsolid\n", r"a vertex coordinate '1_0' is not a number"),
+    ("x.ply", _head("ascii", 1) + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 1.7\n", r"a face index '1.7' is not an integer"),
+    ("x.ply", _head("ascii", 1) + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 nan\n", r"a face index 'nan' is not an integer"),
+    ("x.ply", _head("ascii", 1) + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 1_0\n", r"a face value '1_0' is not a number"),
 ])
 def test_malformed_files_are_refused_saying_why(tmp_path, name, content, match):
     path = tmp_path / name

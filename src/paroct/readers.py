@@ -96,15 +96,28 @@ def _text(data: bytes) -> str:
 
 
 def _numbers(tokens, dtype, what: str) -> np.ndarray:
+    """The tokens (strs) as an array of dtype, or _Malformed naming the first bad one.  Python's
+    number syntax is wider than a file's: '1_0' would read as 10, so underscores are refused."""
     try:
-        return np.array(tokens, dtype=dtype)
+        if "_" not in "".join(tokens):
+            return np.array(tokens, dtype=dtype)
     except (ValueError, OverflowError):
-        for token in tokens:  # name the first bad token (only on the error path)
-            try:
-                dtype(token)
-            except (ValueError, OverflowError):
-                raise _Malformed(f"{what} {token!r} is not {'an integer' if dtype is np.int64 else 'a number'}") from None
-        raise
+        pass
+    for token in tokens:  # name the first bad token (only on the error path)
+        try:
+            if "_" in token:
+                raise ValueError
+            dtype(token)
+        except (ValueError, OverflowError):
+            raise _Malformed(f"{what} {token!r} is not {'an integer' if dtype is np.int64 else 'a number'}") from None
+    raise _Malformed(f"{what}s do not read as numbers")
+
+
+def _int(word: str) -> int:
+    """word as an integer, in a file's syntax: Python's int() also takes '1_0' (ValueError)."""
+    if "_" in word:
+        raise ValueError(f"invalid literal: {word!r}")
+    return int(word)
 
 
 def _named_groups(names: list, triangles: np.ndarray | None = None) -> tuple[np.ndarray | None, tuple[str, ...]]:
@@ -302,7 +315,7 @@ def _obj_polygons(lines: list) -> tuple[np.ndarray, list]:
                 raise _Malformed(f"line {number} reads {line.strip()!r}: a face needs at least 3 corners")
             seen = len(coords) // 3
             try:
-                ids = [int(w.split("/", 1)[0]) for w in words[1:]]
+                ids = [_int(w.split("/", 1)[0]) for w in words[1:]]
                 if max(map(abs, ids)) > len(coords) // 3 + 2**31:  # nothing a file can index
                     raise ValueError
             except ValueError:
@@ -322,11 +335,11 @@ def _obj_triangles(lines: list) -> tuple[np.ndarray, np.ndarray] | None:
     if not f_lines or any(line.lstrip().startswith(("v", "f")) and not line.startswith(("v ", "f ", "vt", "vn", "vp"))
                           for line in lines):
         return None
-    faces_text = " ".join(f_lines)
-    if "/" in faces_text or "-" in faces_text or "#" in faces_text:
+    faces_text, vertices_text = " ".join(f_lines), " ".join(v_lines)
+    if "/" in faces_text or "-" in faces_text or "#" in faces_text or "_" in faces_text + vertices_text:
         return None
     try:
-        coords = np.array(" ".join(v_lines).split()).reshape(len(v_lines), 4)[:, 1:].astype(np.float64)
+        coords = np.array(vertices_text.split()).reshape(len(v_lines), 4)[:, 1:].astype(np.float64)
         faces = np.array(faces_text.split()).reshape(len(f_lines), 4)[:, 1:].astype(np.int64) - 1
     except (ValueError, OverflowError):  # other counts than 3 on a line, or a word that is not a number
         return None
@@ -365,8 +378,8 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     polygons = []
     for words in face_lines:
         try:
-            n = int(words[0])
-            ids = [int(w) for w in words[1:n + 1]]
+            n = _int(words[0])
+            ids = [_int(w) for w in words[1:n + 1]]
             if ids and max(map(abs, ids)) > n_vertices:
                 raise _Malformed(f"a face line reads {' '.join(words)!r}: vertex {max(map(abs, ids))} of {n_vertices}")
         except ValueError:
@@ -400,6 +413,8 @@ def _off_triangles(text: str) -> tuple[np.ndarray, np.ndarray] | None:
     if len(tokens) != 3 * n_vertices + 4 * n_faces:
         return None
     try:
+        if "_" in "".join(tokens):  # Python's syntax, not a file's (read by the slow path, which says so)
+            return None
         vertices = np.array(tokens[:3 * n_vertices], dtype=np.float64).reshape(n_vertices, 3)
         faces = np.array(tokens[3 * n_vertices:], dtype=np.int64).reshape(n_faces, 4)
     except (ValueError, OverflowError):
@@ -498,7 +513,12 @@ def _ply_ascii(body: bytes, elements: list, fmt: str) -> dict:
             if n >= 0 and pos + count * (n + 1) <= len(tokens):
                 rows = _numbers(tokens[pos:pos + count * (n + 1)], np.float64, f"a {name} value").reshape(count, n + 1)
                 if np.all(rows[:, 0] == n):
-                    out[name] = [rows[:, 1:].astype(np.int64)]
+                    ids = rows[:, 1:]
+                    bad = ~(np.isfinite(ids) & (ids == np.round(ids)) & (np.abs(ids) < 2.0**62))
+                    if bad.any():  # '1.7', 'nan', '1e400' would be cast to some vertex
+                        row, col = divmod(int(np.argmax(bad.ravel())), n)
+                        raise _Malformed(f"a {name} index {tokens[pos + row * (n + 1) + 1 + col]!r} is not an integer")
+                    out[name] = [ids.astype(np.int64)]
                     pos += count * (n + 1)
                     continue
         columns = [[] for _ in props]
@@ -530,7 +550,7 @@ def _token(tokens: list, pos: int, name: str, kind: type, what: str):
     if pos >= len(tokens):
         raise _Malformed(f"the file ends inside the {name} elements (truncated?)")
     try:
-        return kind(tokens[pos])
+        return kind(tokens[pos]) if "_" not in tokens[pos] else kind("_")
     except ValueError:
         raise _Malformed(f"a {name} {what} {tokens[pos]!r} is not {'an integer' if kind is int else 'a number'}") from None
 
