@@ -133,6 +133,27 @@ def test_ascii_stl_as_editors_save_it(tmp_path, encode):
     assert _is_box(path)
 
 
+def _binary_stl(faces, count=None) -> bytes:
+    """A binary STL of the 1 x 2 x 3 box (normals zero) whose header gives count (default: the truth)."""
+    body = b"".join(struct.pack("<12fH", 0, 0, 0, *BOX_V[f].ravel(), 0) for f in faces)
+    return bytes(80) + struct.pack("<I", len(faces) if count is None else count) + body
+
+
+def test_binary_stl_counts(tmp_path):
+    """The header's count is the file's: facets past it are padding, as exporters write; but a
+    count of 0 before whole facets is a streaming writer that never went back to write it."""
+    path = tmp_path / "box.stl"
+    path.write_bytes(_binary_stl(CUBE_F))
+    assert _is_box(path)
+    path.write_bytes(_binary_stl(CUBE_F, count=0))
+    assert _is_box(path)
+    path.write_bytes(_binary_stl(CUBE_F) + bytes(50))  # padding after the counted facets
+    assert _is_box(path)
+    path.write_bytes(_binary_stl(CUBE_F, count=5))
+    with pytest.raises(ParoctError, match="open surface"):
+        load_surface(path)
+
+
 def _head(fmt: str, n_faces: int, count: str = "uchar") -> bytes:
     """The header of a PLY of three vertices and n_faces faces."""
     return (f"ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"

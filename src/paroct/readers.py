@@ -146,7 +146,8 @@ _STL_FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("at
 
 def _read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     """Binary STL (84-byte header with the facet count, then 50-byte facets; bytes past the
-    last facet, which some exporters pad, ignored), or ASCII STL when the file is text that
+    last facet, which some exporters pad, ignored; a count of 0 before whole facets read as
+    their number), or ASCII STL when the file is text that
     starts with ``solid`` and is not exactly a binary STL's size (UTF-16 text too, by its
     byte-order mark).  The corners are a soup, faces (F, 3) = 0 .. 3F - 1; binary corners
     stay float32 (_weld compares their bits)."""
@@ -162,6 +163,8 @@ def _read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         have = f"{len(data)} bytes" if n < 0 else f"{len(data)} bytes, its header says {n} triangles (84 + 50 x {n} = {84 + 50 * n} bytes)"
         raise _Malformed(f"neither ASCII STL (text starting with 'solid') nor a complete binary STL: {have}; "
                          "truncated or not an STL file")
+    if n == 0 and len(data) > 84 and (len(data) - 84) % 50 == 0:
+        n = (len(data) - 84) // 50  # a writer that streamed its facets and never wrote their count
     facets = np.frombuffer(data, dtype=_STL_FACET, count=n, offset=84)
     corners = np.ascontiguousarray(facets["corners"]).reshape(-1, 3)
     return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
