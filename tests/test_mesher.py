@@ -726,6 +726,21 @@ def test_a_surface_overlapping_itself_is_refused_where_it_does():
     assert angle < 2 * np.pi * 1.0 / 7 + 0.3 or angle > 2 * np.pi - 0.3  # where the ends meet, near angle 0
 
 
+def test_info_refuses_a_surface_overlapping_itself_as_mesh_does(tmp_path, capsys):
+    """paroct info described the bent bar and exited 0 (session 42's fuzzing), promising a
+    mesh that paroct mesh refuses: it now fails the same way, in one line."""
+    import meshio
+
+    from paroct.cli import main
+
+    vertices, faces = _bent_bar_overlapping_itself()
+    path = tmp_path / "bar.obj"
+    meshio.write(path, meshio.Mesh(vertices, [("triangle", faces)]))
+    assert main(["info", str(path), "--divisions", "20"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the surface intersects itself" in err
+
+
 def test_the_mesh_does_not_depend_on_the_thread_count():
     """Test suites need the same mesh on every machine: the parallel kernels split their work
     into chunks of a fixed count and write disjoint outputs, so one thread gives the same
