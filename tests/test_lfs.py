@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from pathlib import Path
 
@@ -21,7 +22,8 @@ from paroct.surface import load_surface
 
 from . import naive
 
-DATA = Path(__file__).resolve().parent.parent / "data"
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "data"
 
 
 def _area(tris: np.ndarray) -> np.ndarray:
@@ -390,3 +392,20 @@ def test_a_size_function_below_size_refines_the_boundary():
 
     with pytest.raises(ParoctError, match="size_function failed on [0-9]+ points of the surface: boom"):
         paroct.mesh(cube, size=0.2, size_function=failing)
+
+
+def test_a_bent_cell_with_no_finer_piece_in_it_asks_nothing_finer():
+    """A group binned by its pieces' centroids can have no piece of the finer cut whose
+    centroid stays in its cell (a small piece near the cell's corner): curvature_asks crashed
+    there (numba's min of an empty array) on bench_generated's CSG part 607 at diag/40,
+    N = 48 (session 42).  It now stops descending, as for any cell whose finer pieces lie
+    elsewhere, and meshes."""
+    spec = importlib.util.spec_from_file_location("bench_generated", ROOT / "bench" / "bench_generated.py")
+    generated = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(generated)
+    part = generated.csg_part(607)
+    surface = load_surface(part)
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, surface.diagonal / 40)
+    asks = curvature_asks(surface, frame, 48, 4, 40.0)
+    assert asks.empty  # its one bent cell had nothing finer to measure
+    assert paroct.mesh(part, divisions=40, curvature=48).report.n_tets > 0

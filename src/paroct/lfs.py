@@ -167,6 +167,8 @@ def curvature_asks(surface: Surface, frame: FatFrame, per_turn: float, max_depth
         pieces, child_of = triangle_pieces(pieces[near], frame.h / 2 ** (d + 1))
         centroids, area, finer_cells = _piece_measures(frame, d + 1, pieces)
         core = _near_cells(finer_cells // 2, bent, ring=False)
+        if not core.any():  # no piece lies in a cell that bent (its group's centre rounded across a face)
+            break
         keep = _near_cells(finer_cells, finer_cells[core])
         pieces, child_of, core = pieces[keep], child_of[keep], core[keep]
         parent, owner = group[near][child_of], owner[near][child_of]
@@ -280,6 +282,8 @@ def _box_cells(pieces, origin, scale, matrix):
 def _near_cells(cells: np.ndarray, marked: np.ndarray, ring: bool = True) -> np.ndarray:
     """Mask (S,) of the cells (S, 3) among the marked cells (B, 3, repeats allowed), or next
     to one (26 around) with ring."""
+    if len(cells) == 0 or len(marked) == 0:  # near nothing (the kernel's box needs both)
+        return np.zeros(len(cells), dtype=bool)
     return _near(np.ascontiguousarray(cells, dtype=np.int64), np.ascontiguousarray(marked, dtype=np.int64), ring)
 
 
