@@ -1,6 +1,7 @@
 """The paroct command: mesh -> file -> check round trip, exit codes, one-line errors."""
 
 import importlib.util
+import os
 import re
 import subprocess
 import sys
@@ -356,3 +357,26 @@ def test_threads_give_the_same_file_and_leave_numbas_count_as_it_was(tmp_path, c
     assert _run(capsys, "mesh", stl, "-o", tmp_path / "one.msh", "--patches", "--threads", "1")[0] == 0
     assert numba.get_num_threads() == before
     assert (tmp_path / "one.msh").read_bytes() == (tmp_path / "all.msh").read_bytes()
+
+
+@pytest.mark.parametrize("env, want", [({}, "PASSIVE"), ({"OMP_WAIT_POLICY": "ACTIVE"}, "ACTIVE"),
+                                       ({"GOMP_SPINCOUNT": "10000"}, None)])
+def test_the_program_lets_idle_threads_sleep_unless_told_otherwise(monkeypatch, env, want):
+    """console_main (the paroct program) asks OpenMP to let idle threads sleep, so that runs
+    side by side share the cores (two spinning runs took 720 ms a call each where one took
+    24), but keeps what the environment says; main() itself, as the library, sets nothing."""
+    import paroct.cli as cli
+
+    for name in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    seen = {}
+
+    def main(argv=None):
+        seen["policy"] = os.environ.get("OMP_WAIT_POLICY")
+        return 0
+
+    monkeypatch.setattr(cli, "main", main)
+    assert cli.console_main() == 0
+    assert seen["policy"] == want
