@@ -364,7 +364,7 @@ def test_threads_give_the_same_file_and_leave_numbas_count_as_it_was(tmp_path, c
 def test_the_program_lets_idle_threads_sleep_unless_told_otherwise(monkeypatch, env, want):
     """console_main (the paroct program) asks OpenMP to let idle threads sleep, so that runs
     side by side share the cores (two spinning runs took 720 ms a call each where one took
-    24), but keeps what the environment says; main() itself, as the library, sets nothing."""
+    24), but keeps what the environment says."""
     import paroct.cli as cli
 
     for name in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT"):
