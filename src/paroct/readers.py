@@ -170,6 +170,25 @@ def _read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
 
 
+def binary_stl_count_note(path: str | os.PathLike) -> str:
+    """'' unless path is a binary STL whose header counts fewer facets than the whole 50-byte
+    records after it: then a clause saying so, for the error of a surface that came out open
+    or empty (the records past the count are read as padding, _read_stl)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(84)
+            size = os.fstat(f.fileno()).st_size
+    except OSError:
+        return ""
+    if len(head) < 84 or _looks_like_text(head) or (size - 84) % 50:
+        return ""
+    n, held = int(np.frombuffer(head, dtype="<u4", count=1, offset=80)[0]), (size - 84) // 50
+    if held <= n:
+        return ""
+    return (f"; its header counts {n} triangles, but {held} whole 50-byte facet records follow the header "
+            "(those past the count are read as padding): was the count written wrong?")
+
+
 def _looks_like_text(start: bytes) -> bool:
     """Whether a file starting with these bytes may be ASCII STL: 'solid' after an optional
     byte-order mark and whitespace, and no NUL or other control bytes but whitespace."""

@@ -21,7 +21,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
-from .readers import read_surface_file
+from .readers import binary_stl_count_note, read_surface_file
 from .topology import link_fans, union, vertex_links
 
 SurfaceSource = Union[str, os.PathLike, manifold3d.Manifold, tuple]
@@ -728,6 +728,10 @@ def load_surface(source: SurfaceSource) -> Surface:
             return surface_from_arrays(read.vertices, read.faces, str(source), face_groups=read.face_groups,
                                        group_names=read.group_names)
         except ParoctError as exc:
+            if os.fspath(source).lower().endswith(".stl") and ("open surface" in str(exc) or "empty" in str(exc)):
+                note = binary_stl_count_note(source)
+                if note:
+                    raise ParoctError(f"{exc}{note}") from None
             if os.fspath(source).lower().endswith(".msh") and "open surface" in str(exc):
                 raise ParoctError(f"{exc}; a Gmsh file holds only the elements of its physical groups when it has "
                                   "any: put every surface of the part in one (or set Mesh.SaveAll = 1)") from None
