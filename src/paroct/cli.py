@@ -447,15 +447,12 @@ def _patch_lines(surface, labels: np.ndarray) -> list[str]:
 def _thin_places(surface, size: float) -> str:
     """The thinnest walls and gaps under 2 x size that the lattice rows at size find with their
     two sides facing squarely (those mesh() refines near, when the mesh at size loses them)."""
-    from . import rays
-    from .frame import X_AXIS_DIRECTION, fat_frame
-    from .mesher import THIN_FACING, _check_winding, surface_thin_features
+    from .frame import fat_frame
+    from .mesher import THIN_FACING, checked_x_rows, surface_thin_features
 
     frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
-    snapped, faces = rays.snap_surface(frame, surface.vertices), np.ascontiguousarray(surface.faces, dtype=np.int64)
-    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-    _check_winding(frame, crossings[X_AXIS_DIRECTION])  # a surface mesh refuses, refused here too
-    found, _ = surface_thin_features(surface, frame, snapped, faces, crossings).facing_below(THIN_FACING).thinnest_below(2 * size)
+    features = surface_thin_features(surface, frame, *checked_x_rows(surface, frame))  # refused as mesh refuses
+    found, _ = features.facing_below(THIN_FACING).thinnest_below(2 * size)
     if not found:
         return f"no wall or gap thinner than 2 x size = {2 * size:.4g} found along the lattice rows"
     return (f"thinner than 2 x size = {2 * size:.4g}: thinnest {', thinnest '.join(found)}; if a pass at this size "

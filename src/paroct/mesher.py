@@ -742,10 +742,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     report.levels = frame.levels
     stages.done("frame")
 
-    snapped = rays.snap_surface(frame, surface.vertices)
-    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-    _check_winding(frame, crossings[X_AXIS_DIRECTION])
+    snapped, faces, crossings = checked_x_rows(surface, frame)
     keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = _leaf_levels(frame, levels)
@@ -831,6 +828,17 @@ def surface_thin_features(surface: Surface, frame: FatFrame, snapped: np.ndarray
         if d not in crossings:
             crossings[d] = rays.row_crossings(frame, snapped, faces, d)
     return find_thin_features(frame, crossings, surface.vertices, faces)
+
+
+def checked_x_rows(surface: Surface, frame: FatFrame) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The surface in frame: its vertices snapped (rays.snap_surface), its faces (F, 3) int64
+    and {X_AXIS_DIRECTION: its crossings with the rows along x}; ParoctError if a row enters
+    or leaves the solid twice in a row (_check_winding), as a pass and paroct info refuse."""
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
+    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+    _check_winding(frame, crossings[X_AXIS_DIRECTION])
+    return snapped, faces, crossings
 
 
 def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:

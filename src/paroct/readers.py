@@ -105,19 +105,18 @@ def _numbers(tokens, dtype, what: str) -> np.ndarray:
         pass
     for token in tokens:  # name the first bad token (only on the error path)
         try:
-            if "_" in token:
-                raise ValueError
-            dtype(token)
+            _number(token, dtype)
         except (ValueError, OverflowError):
             raise _Malformed(f"{what} {token!r} is not {'an integer' if dtype is np.int64 else 'a number'}") from None
     raise _Malformed(f"{what}s do not read as numbers")
 
 
-def _int(word: str) -> int:
-    """word as an integer, in a file's syntax: Python's int() also takes '1_0' (ValueError)."""
+def _number(word: str, kind):
+    """word as kind (int, float or a numpy scalar type) in a file's syntax: Python's also takes
+    '1_0' for 10, a ValueError here."""
     if "_" in word:
         raise ValueError(f"invalid literal: {word!r}")
-    return int(word)
+    return kind(word)
 
 
 def _named_groups(names: list, triangles: np.ndarray | None = None) -> tuple[np.ndarray | None, tuple[str, ...]]:
@@ -337,7 +336,7 @@ def _obj_polygons(lines: list) -> tuple[np.ndarray, list]:
                 raise _Malformed(f"line {number} reads {line.strip()!r}: a face needs at least 3 corners")
             seen = len(coords) // 3
             try:
-                ids = [_int(w.split("/", 1)[0]) for w in words[1:]]
+                ids = [_number(w.split("/", 1)[0], int) for w in words[1:]]
                 if max(map(abs, ids)) > len(coords) // 3 + 2**31:  # nothing a file can index
                     raise ValueError
             except ValueError:
@@ -358,7 +357,7 @@ def _obj_triangles(lines: list) -> tuple[np.ndarray, np.ndarray] | None:
                           for line in lines):
         return None
     faces_text, vertices_text = " ".join(f_lines), " ".join(v_lines)
-    if "/" in faces_text or "-" in faces_text or "#" in faces_text or "_" in faces_text + vertices_text:
+    if "/" in faces_text or "-" in faces_text or "#" in faces_text or "_" in faces_text or "_" in vertices_text:
         return None
     try:
         coords = np.array(vertices_text.split()).reshape(len(v_lines), 4)[:, 1:].astype(np.float64)
@@ -400,8 +399,8 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     polygons = []
     for words in face_lines:
         try:
-            n = _int(words[0])
-            ids = [_int(w) for w in words[1:n + 1]]
+            n = _number(words[0], int)
+            ids = [_number(w, int) for w in words[1:n + 1]]
             if ids and max(map(abs, ids)) > n_vertices:
                 raise _Malformed(f"a face line reads {' '.join(words)!r}: vertex {max(map(abs, ids))} of {n_vertices}")
         except ValueError:
@@ -572,7 +571,7 @@ def _token(tokens: list, pos: int, name: str, kind: type, what: str):
     if pos >= len(tokens):
         raise _Malformed(f"the file ends inside the {name} elements (truncated?)")
     try:
-        return kind(tokens[pos]) if "_" not in tokens[pos] else kind("_")
+        return _number(tokens[pos], kind)
     except ValueError:
         raise _Malformed(f"a {name} {what} {tokens[pos]!r} is not {'an integer' if kind is int else 'a number'}") from None
 
