@@ -557,6 +557,27 @@ def _int_lines(rows, first_id, reference, sep):
     return out
 
 
+def _read_gmsh_tets(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """Points and tets of a Gmsh MSH file (paroct.msh), None if the file is no Gmsh MSH
+    (an ANSYS .msh); ParoctError for a damaged one or one without tets."""
+    from .msh import TETRA, MshError, is_msh, read_msh, type_name
+
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if not is_msh(data):
+        return None
+    try:
+        msh = read_msh(data)
+    except MshError as exc:
+        raise ParoctError(f"cannot read {path} as Gmsh MSH: {exc}") from None
+    if TETRA not in msh.elements or not len(msh.elements[TETRA].nodes):
+        kinds = sorted(type_name(kind) for kind in msh.elements) or ["none"]
+        raise ParoctError(f"{path} holds no tetrahedra (cells: {', '.join(kinds)})")
+    return msh.points, msh.elements[TETRA].nodes
+
+
 def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Points (N, 3) float64 and tets (M, 4) int64 of a volume mesh file."""
     import meshio
@@ -568,6 +589,11 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if ext in _FORMAT_OVERRIDES:  # ours first, then any other format of the extension (.msh: Gmsh, ANSYS)
         ours = _FORMAT_OVERRIDES[ext][0]
         formats = [ours] + [f for f in meshio.extension_to_filetypes.get(ext, []) if f != ours]
+    if ext == ".msh":
+        gmsh = _read_gmsh_tets(path)
+        if gmsh is not None:
+            return gmsh
+        formats.remove("gmsh")
     raw, first_error = None, None
     for fmt in formats:
         # meshio prints a reader's complaint (stdout) and its own (stderr), then exits: the

@@ -4,8 +4,8 @@ Each reader returns vertices (V, 3) and triangles (F, 3) int64, polygons split i
 and the named groups the file puts its triangles in where it has two or more (the solids
 of an ASCII STL, the ``g`` or ``o`` statements of an OBJ, the physical or CAD surfaces of a
 Gmsh MSH: CAD programs export a part's faces or bodies so, and they are the patches
-boundary conditions go on), or raises ParoctError saying what is wrong and where.  MSH goes
-through meshio, the rest is read here.  paroct reads these formats itself:
+boundary conditions go on), or raises ParoctError saying what is wrong and where.  MSH is
+read by paroct.msh.  paroct reads these formats itself:
 meshio's readers refused valid files (OBJ with negative or ``v/vt`` indices, PLY with its
 properties in another order or its list named ``vertex_index``, OFF with quads or colours,
 STL with a byte-order mark), and walked a binary PLY whose header claimed 2e9 faces for
@@ -54,7 +54,7 @@ def read_surface_file(path: str | os.PathLike) -> SurfaceFile:
     if ext not in SURFACE_EXTENSIONS:
         raise ParoctError(f"unknown surface format {ext or '(no extension)'!r} of {path}; use one of {', '.join(SURFACE_EXTENSIONS)}")
     try:
-        data = path if ext in _READ_FROM_PATH else path.read_bytes()
+        data = path.read_bytes()
     except OSError as exc:
         raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
@@ -633,64 +633,44 @@ def _ply_binary(body: bytes, elements: list, order: str) -> dict:
 
 # --- Gmsh MSH ----------------------------------------------------------------------------
 
-def _read_msh(path: Path) -> SurfaceFile:
-    """A Gmsh surface mesh (MSH 2.2 or 4.1, ASCII or binary, read by meshio): its triangles
-    (quads split in two), grouped by physical surface (named as the file's $PhysicalNames
-    name them, else ``physical_<tag>``; elements in none are ``default``), or, in a file with
-    no physical groups, by geometrical surface (``surface_<tag>``: the CAD faces).  Other
-    elements (points, lines, a volume's tets) are ignored."""
-    import contextlib
-    import io
-    import warnings
-
-    from meshio import gmsh
+def _read_msh(data: bytes) -> SurfaceFile:
+    """A Gmsh surface mesh (MSH 4.1 or 2.2, ASCII or binary, read by paroct.msh): its
+    triangles (quads split in two), grouped by physical surface (named as the file's
+    $PhysicalNames name them, else ``physical_<tag>``; elements in none are ``default``), or,
+    in a file with no physical groups, by geometrical surface (``surface_<tag>``: the CAD
+    faces).  Other elements (points, lines, a volume's tets) are ignored."""
+    from .msh import QUAD, TRIANGLE, MshError, read_msh, type_name
 
     try:
-        # The format's reader itself (meshio.read prints a reader's complaint and exits), its
-        # warnings about damaged sections (printed to stderr) kept off the user's terminal.
-        with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()), \
-                contextlib.redirect_stdout(io.StringIO()):
-            warnings.simplefilter("ignore")
-            mesh = gmsh.read(str(path))
-    except Exception as exc:  # meshio raises anything on a malformed file: say what it said
-        said = str(exc).strip().splitlines()
-        raise _Malformed(f"not a Gmsh file, or a damaged one (meshio: {type(exc).__name__}: "
-                         f"{said[0] if said else 'malformed'})") from None
-    names_of = {int(tag): name for name, (tag, dim) in
-                ((name, np.asarray(v).ravel()[:2]) for name, v in mesh.field_data.items()) if int(dim) == 2}
-    physical, geometrical = mesh.cell_data.get("gmsh:physical"), mesh.cell_data.get("gmsh:geometrical")
-    by_physical = physical is not None and any(
-        block.type in ("triangle", "quad") and np.any(np.asarray(tags) != 0) for block, tags in zip(mesh.cells, physical))
-    source = physical if by_physical else geometrical
+        msh = read_msh(data)
+    except MshError as exc:
+        raise _Malformed(str(exc)) from None
+    surface = [msh.elements[kind] for kind in (TRIANGLE, QUAD) if kind in msh.elements]
+    if not surface:
+        kinds = sorted(type_name(kind) for kind in msh.elements)
+        raise _Malformed(f"no triangles or quads (it holds {', '.join(kinds) or 'no elements'}): give paroct the "
+                         "part's surface mesh (in Gmsh, its 2D mesh)")
+    by_physical = any(np.any(block.physical != 0) for block in surface)
     triangles, tags = [], []
-    for k, block in enumerate(mesh.cells):
-        if block.type not in ("triangle", "quad"):
-            continue
-        rows = np.asarray(block.data, dtype=np.int64)
-        block_tags = np.zeros(len(rows), dtype=np.int64) if source is None else np.asarray(source[k], np.int64).ravel()
-        if block.type == "quad":
+    for block in surface:
+        rows, block_tags = block.nodes, block.physical if by_physical else block.entity
+        if rows.shape[1] == 4:
             rows, block_tags = _fans_of_rows(rows), np.repeat(block_tags, 2)
         triangles.append(rows)
         tags.append(block_tags)
-    if not triangles:
-        kinds = sorted({block.type for block in mesh.cells})
-        raise _Malformed(f"no triangles or quads (it holds {', '.join(kinds) or 'no elements'}): give paroct the "
-                         "part's surface mesh (in Gmsh, its 2D mesh)")
     # Names per distinct tag, in order of first appearance, not per triangle.
     distinct, first, inverse = np.unique(np.concatenate(tags), return_index=True, return_inverse=True)
     order = np.argsort(first)
-    names = [("default" if t == 0 else names_of.get(int(t), f"physical_{t}")) if by_physical
-             else ("default" if source is None else f"surface_{t}") for t in distinct[order].tolist()]
+    names = [("default" if t == 0 else msh.names.get((2, t), f"physical_{t}")) if by_physical else f"surface_{t}"
+             for t in distinct[order].tolist()]
     of_distinct, group_names = _named_groups(names)
     face_groups = None
     if of_distinct is not None:
         by_tag = np.empty(distinct.size, dtype=np.int32)
         by_tag[order] = of_distinct
         face_groups = by_tag[inverse.ravel()]
-    return SurfaceFile(np.ascontiguousarray(mesh.points[:, :3], dtype=np.float64), np.concatenate(triangles),
+    return SurfaceFile(np.ascontiguousarray(msh.points, dtype=np.float64), np.concatenate(triangles),
                        face_groups, group_names)
 
 
 _READERS = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".msh": _read_msh}
-#: Formats whose reader opens the file itself (meshio's), given its path instead of its bytes.
-_READ_FROM_PATH = (".msh",)
