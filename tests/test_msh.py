@@ -108,10 +108,10 @@ def test_node_tags_defined_twice_or_below_one_are_refused():
 
 
 @pytest.mark.parametrize("header, match", [
-    (b"$MeshFormat\n4.0 0 8\n$EndMeshFormat\n", r"MSH version 4.0 is not read: save the mesh as MSH 4.1 or 2.2"),
+    (b"$MeshFormat\n4.0 0 8\n$EndMeshFormat\n", r"MSH version '4.0' is not read: save the mesh as MSH 4.1 or 2.2"),
     (b"$MeshFormat\n2.2 1 8\n\x00\x00\x00\x01\n$EndMeshFormat\n", r"big-endian files are not read"),
     (b"$NOD\n1\n1 0 0 0\n$ENDNOD\n", r"not a Gmsh MSH file: it does not start with \$MeshFormat"),
-    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 1_0\n$EndNodes\n", r"\$Nodes holds '1_0', which is not a number"),
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 1_0\n$EndNodes\n", r"\$Nodes holds '1_0', which is not a finite number"),
     (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n", r"it has no \$Elements section"),
     (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n2\n1 0 0 0\n$EndNodes\n", r"\$Nodes ends early"),
     (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n$Elements\n1\n1 4 0 1 1 1 1.5\n$EndElements\n",
@@ -152,3 +152,99 @@ def test_damaged_files_raise_msh_error_or_read_what_they_hold(tmp_path, version)
         for block in msh.elements.values():
             assert block.nodes.size == 0 or 0 <= block.nodes.min() <= block.nodes.max() < len(msh.points)
     assert 0 < read < len(damaged)
+
+
+@pytest.mark.parametrize("data, match", [
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n" + "\u00b3".encode() + b"\n", r"\$Nodes starts with '\u00b3', not a count"),
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n" + b"9" * 5000 + b"\n", r"\$Nodes starts with '9{40}\.\.\.', not a count$"),
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$PhysicalNames\n1\n2 " + b"1" * 5000 + b' "a"\n', r"is not 'dimension tag"),
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n9007199254740993 0 0 0\n$EndNodes\n", r"beyond the 2\*\*53"),
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 nan\n$EndNodes\n", r"'nan', which is not a finite number"),
+    (b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\x1b[31m\n", r"found '\$Nodes\\x1b\[31m'$"),
+])
+def test_counts_tags_and_names_beyond_what_is_read_say_so_in_one_line(data, match):
+    """Found by fuzzing: counts in other scripts' digits or of 5000 digits raised ValueError,
+    text tags past 2**53 were rounded onto other nodes, control bytes reached the message."""
+    with pytest.raises(MshError, match=match):
+        read_msh(data)
+
+
+def _parametric22(binary: bool) -> bytes:
+    """MSH 2.2 with $ParametricNodes (Gmsh's Mesh.SaveParametric): 'tag x y z dim entity',
+    then u on a curve and u v on a surface; the three triangles of TRIANGLES[:3] on surface 1."""
+    dims = np.arange(len(POINTS)) % 4
+    head = f"$MeshFormat\n2.2 {int(binary)} 8\n".encode() + (b"\x01\x00\x00\x00\n" if binary else b"")
+    head += b"$EndMeshFormat\n$ParametricNodes\n" + f"{len(POINTS)}\n".encode()
+    if binary:
+        body = b"".join(np.array([k + 1], "<i4").tobytes() + POINTS[k].astype("<f8").tobytes()
+                        + np.array([dims[k], 5], "<i4").tobytes() + np.full(dims[k] if dims[k] in (1, 2) else 0, 0.5).tobytes()
+                        for k in range(len(POINTS)))
+        elements = np.concatenate([[2, 3, 2], np.column_stack([np.arange(1, 4), np.full(3, 4), np.ones(3, int),
+                                                                TRIANGLES[:3] + 1]).ravel()]).astype("<i4").tobytes()
+    else:
+        body = "".join(f"{k + 1} {' '.join(repr(float(v)) for v in POINTS[k])} {dims[k]} 5"
+                       + " 0.5" * (dims[k] if dims[k] in (1, 2) else 0) + "\n" for k in range(len(POINTS))).encode()
+        elements = "".join(f"{k + 1} 2 2 4 1 {' '.join(str(v + 1) for v in TRIANGLES[k])}\n" for k in range(3)).encode()
+    return head + body + b"\n$EndParametricNodes\n$Elements\n3\n" + elements + b"\n$EndElements\n"
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_msh_22_parametric_nodes_are_read(binary):
+    msh = read_msh(_parametric22(binary))
+    assert np.array_equal(msh.points, POINTS)
+    assert np.array_equal(msh.elements[TRIANGLE].nodes, TRIANGLES[:3])
+    assert list(msh.elements[TRIANGLE].physical) == [4] * 3 and list(msh.elements[TRIANGLE].entity) == [1] * 3
+
+
+def test_msh_22_copies_of_an_element_in_two_groups_are_one_element(tmp_path):
+    """Gmsh's MSH 2 writer lists an element once per physical group: read once, in the first
+    group, as MSH 4.1 gives it; an element repeated in one group stays repeated."""
+    rows = np.concatenate([TRIANGLES, TRIANGLES[:4], TRIANGLES[5:6]])
+    physical = np.concatenate([np.ones(12, int), np.full(4, 2), np.ones(1, int)])
+    mesh = meshio.Mesh(POINTS, [("triangle", rows)], cell_data={"gmsh:physical": [physical],
+                                                               "gmsh:geometrical": [np.ones(17, int)]})
+    meshio.write(tmp_path / "copies.msh", mesh, file_format="gmsh22", binary=False)
+    msh = read_msh((tmp_path / "copies.msh").read_bytes())
+    assert np.array_equal(msh.elements[TRIANGLE].nodes, np.concatenate([TRIANGLES, TRIANGLES[5:6]]))
+    assert set(msh.elements[TRIANGLE].physical) == {1}
+
+
+def _partitioned41() -> bytes:
+    """A 4.1 ASCII file of a surface cut in two partitions: surface 1 (physical 5) is
+    partitioned into surfaces 7 and 8, and surface 9 is an interface whose parent is volume
+    1; the triangles on 7 and 8 are the model's, the one on 9 is no part of it."""
+    n = len(POINTS)
+    lines = ["$MeshFormat", "4.1 0 8", "$EndMeshFormat", "$Entities", "0 0 1 0", "1 0 0 0 1 1 1 1 5 0",
+             "$EndEntities", "$PartitionedEntities", "2", "0", "0 0 3 0",
+             "7 2 1 1 1 0 0 0 1 1 1 1 5 0", "8 2 1 1 2 0 0 0 1 1 1 1 5 0", "9 3 1 2 1 2 0 0 0 1 1 1 0 0",
+             "$EndPartitionedEntities", "$Nodes", f"1 {n} 1 {n}", f"2 7 0 {n}"]
+    lines += [str(k + 1) for k in range(n)] + [" ".join(repr(float(v)) for v in p) for p in POINTS]
+    lines += ["$EndNodes", "$Elements", "3 5 1 5", "2 7 2 2", "1 1 2 3", "2 2 3 4", "2 8 2 2", "3 3 4 5", "4 4 5 6",
+              "2 9 2 1", "5 7 8 9", "$EndElements", ""]
+    return "\n".join(lines).encode()
+
+
+def test_msh_41_partitioned_elements_take_their_parent_entity_and_groups():
+    msh = read_msh(_partitioned41())
+    assert np.array_equal(msh.elements[TRIANGLE].nodes, [[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5]])
+    assert set(msh.elements[TRIANGLE].entity) == {1} and set(msh.elements[TRIANGLE].physical) == {5}
+
+
+@pytest.mark.parametrize("change, match", [
+    (("2 7 2 2", "3 7 2 2"), r"puts triangle elements on an entity of dimension 3"),
+    (("2 8 2 2", "2 99 2 2"), r"names entity 99 of dimension 2, which \$Entities does not list"),
+])
+def test_msh_41_element_blocks_must_name_listed_entities_of_their_dimension(change, match):
+    with pytest.raises(MshError, match=match):
+        read_msh(_partitioned41().replace(change[0].encode(), change[1].encode(), 1))
+
+
+def test_a_byte_order_mark_is_read_past_and_a_msh_of_neither_kind_says_so(tmp_path, capsys):
+    path = tmp_path / "bom.msh"
+    write_mesh(path, POINTS, TETS)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    assert np.array_equal(read_mesh(path)[1], TETS)
+    path.write_bytes(b"$MeshFormet\n2.2 0 8\n$EndMeshFormat\n")
+    assert main(["check", str(path)]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "not a Gmsh MSH file (it does not start with $MeshFormat), nor an ANSYS one")

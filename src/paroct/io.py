@@ -594,7 +594,7 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if gmsh is not None:
             return gmsh
         formats.remove("gmsh")
-    raw, first_error = None, None
+    raw, first_error, said = None, None, ""
     for fmt in formats:
         # meshio prints a reader's complaint (stdout) and its own (stderr), then exits: the
         # reader's complaint, if it has one, is the reason.
@@ -611,8 +611,12 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
                          "which the file does not define"]
             elif "need at least one array to concatenate" in text:  # meshio's .vtu reader on no cells
                 lines = ["it holds no cells"]
-            first_error = first_error or (lines[0] if lines else f"not a {fmt or ext} file, or a damaged one")
+            said = said or (lines[0] if lines else "")
+            first_error = first_error or said or f"not a {fmt or ext} file, or a damaged one"
     if raw is None:
+        if ext == ".msh":
+            raise ParoctError(f"cannot read {path}: not a Gmsh MSH file (it does not start with $MeshFormat), "
+                              f"nor an ANSYS one" + (f" (meshio: {said})" if said else ""))
         tried = f" (read as {' and as '.join(formats)})" if len(formats) > 1 else ""
         raise ParoctError(f"cannot read {path}{tried}: {first_error}")
     blocks = [np.asarray(b.data, dtype=np.int64).reshape(-1, 4) for b in raw.cells if b.type == "tetra"]

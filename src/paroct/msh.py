@@ -28,8 +28,19 @@ NODES_PER_TYPE = {1: 2, 2: 3, 3: 4, 4: 4, 5: 8, 6: 6, 7: 5, 8: 3, 9: 6, 10: 9, 1
 #: Names of the types a message may mention.
 TYPE_NAMES = {1: "line", 2: "triangle", 3: "quad", 4: "tetra", 5: "hexahedron", 6: "wedge", 7: "pyramid",
               8: "line3", 9: "triangle6", 10: "quad9", 11: "tetra10", 15: "vertex"}
+#: Dimension of each type's element (points 0, lines 1, surfaces 2, volumes 3).
+TYPE_DIMENSION = {kind: 0 if kind == 15 else 1 if kind in (1, 8, 26, 27, 28) else
+                  2 if kind in (2, 3, 9, 10, 16, 20, 21, 22, 23, 24, 25) else 3 for kind in NODES_PER_TYPE}
 TRIANGLE, QUAD, TETRA = 2, 3, 4
 _SPACE = re.compile(rb"\s*")
+_COUNT = re.compile(r"[0-9]{1,18}")
+_TAG = re.compile(r"-?[0-9]{1,18}")
+_BOM = b"\xef\xbb\xbf"
+
+
+def _shown(text: str) -> str:
+    """File text quoted for a message: repr (control bytes escaped), cut to 40 characters."""
+    return repr(text[:40] + ("..." if len(text) > 40 else ""))
 
 
 class MshError(Exception):
@@ -57,7 +68,8 @@ class MshFile(NamedTuple):
 
 def is_msh(data: bytes) -> bool:
     """Whether data starts (after white space) as a Gmsh MSH 2 or 4 file does."""
-    return data.startswith(b"$MeshFormat", _SPACE.match(data).end())
+    start = len(_BOM) if data.startswith(_BOM) else 0
+    return data.startswith(b"$MeshFormat", _SPACE.match(data, start).end())
 
 
 def type_name(kind: int) -> str:
@@ -70,18 +82,24 @@ def read_msh(data: bytes) -> MshFile:
     reader = _Reader(data)
     version, binary, size_t = reader.format()
     names, nodes, elements, entities = {}, None, None, ({}, {}, {}, {})
+    seen = set()
+    read_once = {"PhysicalNames", "Entities", "PartitionedEntities", "Nodes", "ParametricNodes", "Elements"}
     while (section := reader.next_section()) is not None:
+        if section in read_once:
+            if section in seen or (section.endswith("Nodes") and nodes is not None):
+                raise MshError(f"it has two ${section} sections")
+            seen.add(section)
         if section == "PhysicalNames":
             names = reader.physical_names()
-        elif section == "Entities" and version == 4:
-            entities = reader.entities(binary, size_t)
-        elif section == "Nodes":
-            if nodes is not None:
-                raise MshError("it has two $Nodes sections")
-            nodes = reader.nodes4(binary, size_t) if version == 4 else reader.nodes2(binary)
-        elif section == "Elements":
+        elif section in ("Entities", "PartitionedEntities") and version == 4:
             if elements is not None:
-                raise MshError("it has two $Elements sections")
+                raise MshError(f"its ${section} section comes after $Elements")
+            for dim, listed in enumerate(reader.entities(binary, size_t, partitioned=section != "Entities")):
+                entities[dim].update(listed)
+        elif section == "Nodes" or (section == "ParametricNodes" and version == 2):
+            nodes = (reader.nodes4(binary, size_t) if version == 4
+                     else reader.nodes2(binary, parametric=section == "ParametricNodes"))
+        elif section == "Elements":
             elements = reader.elements4(binary, size_t, entities) if version == 4 else reader.elements2(binary)
         else:  # $Comments, $NodeData, $Periodic, ...: the manual says to skip what one does not read
             reader.skip(section)
@@ -89,8 +107,8 @@ def read_msh(data: bytes) -> MshFile:
         raise MshError(f"it has no ${'Nodes' if nodes is None else 'Elements'} section")
     tags, points = nodes
     index = _node_index(tags)
-    return MshFile(points, {kind: MshElements(index(nodes), entity, physical)
-                            for kind, (nodes, entity, physical) in elements.items()}, names)
+    return MshFile(points, {kind: MshElements(index(node_tags), entity, physical)
+                            for kind, (node_tags, entity, physical) in elements.items()}, names)
 
 
 def _node_index(tags: np.ndarray):
@@ -133,7 +151,7 @@ class _Reader:
     """A cursor over the file's bytes, section by section."""
 
     def __init__(self, data: bytes):
-        self.data, self.pos = data, 0
+        self.data, self.pos = data, len(_BOM) if data.startswith(_BOM) else 0
 
     def _skip_space(self) -> bool:
         """Move the cursor past white space; whether anything follows."""
@@ -148,14 +166,14 @@ class _Reader:
         line = self._line()
         words = line.split()
         if len(words) < 3:
-            raise MshError(f"its $MeshFormat line {line!r} is not 'version file-type data-size'")
+            raise MshError(f"its $MeshFormat line {_shown(line)} is not 'version file-type data-size'")
         version, file_type, data_size = words[:3]
         if version not in ("2", "2.0", "2.1", "2.2", "4.1"):
-            raise MshError(f"MSH version {version} is not read: save the mesh as MSH 4.1 or 2.2 "
+            raise MshError(f"MSH version {_shown(version)} is not read: save the mesh as MSH 4.1 or 2.2 "
                            "(Gmsh: Mesh.MshFileVersion)")
         if file_type not in ("0", "1") or data_size not in ("4", "8"):
-            raise MshError(f"its $MeshFormat line {line!r} has file type {file_type} (0 or 1) "
-                           f"and data size {data_size} (4 or 8)")
+            raise MshError(f"its $MeshFormat line {_shown(line)} has file type {_shown(file_type)} (0 or 1) "
+                           f"and data size {_shown(data_size)} (4 or 8)")
         binary = file_type == "1"
         if binary:
             one = self._binary(np.dtype("<i4"), 1, "the byte-order mark")[0]
@@ -172,8 +190,11 @@ class _Reader:
             return None
         line = self._line()
         if not line.startswith("$") or line.startswith("$End"):
-            raise MshError(f"expected a section ($Name), found {line[:40]!r}")
-        return line[1:].strip()
+            raise MshError(f"expected a section ($Name), found {_shown(line)}")
+        name = line[1:].strip()
+        if not re.fullmatch(r"[A-Za-z0-9_]{1,40}", name):
+            raise MshError(f"expected a section ($Name), found {_shown(line)}")
+        return name
 
     def skip(self, name: str) -> None:
         end = self.data.find(b"$End" + name.encode(), self.pos)
@@ -222,28 +243,29 @@ class _Reader:
                     values = np.fromstring(body.decode("ascii"), sep=" ")
             except (ValueError, DeprecationWarning):
                 values = None
-            if values is not None:
-                if not np.isfinite(values).all():
-                    raise MshError(f"${name} holds a number beyond float64's range")
+            if values is not None and np.isfinite(values).all():
                 return values
         for token in body.split():
+            word = token.decode("utf-8", errors="replace")
             try:
-                float(token.decode("utf-8", errors="replace").replace("_", "x"))
+                finite = re.fullmatch(r"[-+0-9.eE]+", word) and np.isfinite(float(word))
             except ValueError:
-                raise MshError(f"${name} holds {token.decode('utf-8', errors='replace')[:40]!r}, which is not a number") from None
+                finite = False
+            if not finite:
+                raise MshError(f"${name} holds {_shown(word)}, which is not a finite number")
         raise MshError(f"${name} holds numbers that do not read")
 
     def physical_names(self) -> dict:
         """(dim, tag) -> name; a name is quoted, with the quotes of Gmsh's writer."""
         count = self._line()
-        if not count.isdigit():
-            raise MshError(f"$PhysicalNames starts with {count[:40]!r}, not a count")
+        if not _COUNT.fullmatch(count):
+            raise MshError(f"$PhysicalNames starts with {_shown(count)}, not a count")
         names = {}
         for _ in range(int(count)):
             line = self._line()
             words = line.split(maxsplit=2)
-            if len(words) < 3 or not all(w.lstrip("-").isdigit() for w in words[:2]):
-                raise MshError(f"$PhysicalNames line {line[:60]!r} is not 'dimension tag \"name\"'")
+            if len(words) < 3 or not all(_TAG.fullmatch(w) for w in words[:2]):
+                raise MshError(f"$PhysicalNames line {_shown(line)} is not 'dimension tag \"name\"'")
             name = words[2]
             if len(name) >= 2 and name[0] == name[-1] == '"':
                 name = name[1:-1]
@@ -258,33 +280,40 @@ class _Reader:
 
     # --- MSH 4.1 ------------------------------------------------------------------------
 
-    def entities(self, binary: bool, size_t: np.dtype) -> tuple:
-        """Per dimension 0..3: entity tag -> its physical tags (list of int)."""
+    def entities(self, binary: bool, size_t: np.dtype, partitioned: bool = False) -> tuple:
+        """Per dimension 0..3: entity tag -> (its physical tags, (parent dimension, parent
+        tag)) of $Entities (an entity is its own parent) or, partitioned, of
+        $PartitionedEntities, whose entities are the pieces of the model's entities
+        (partition interfaces: pieces of an entity of another dimension)."""
+        section = "PartitionedEntities" if partitioned else "Entities"
         out = ({}, {}, {}, {})
         if binary:
-            read = self._typed_binary(size_t)
+            types = {"int": np.dtype("<i4"), "size_t": size_t, "double": np.dtype("<f8")}
+
+            def read(kind: str, count: int) -> np.ndarray:
+                return self._binary(types[kind], count, f"${section}")
         else:
-            read = _Numbers(self._ascii_numbers("Entities"), "$Entities")
+            read = _Numbers(self._ascii_numbers(section), f"${section}")
+        if partitioned:
+            read("size_t", 1)  # partitions
+            read("int", 2 * int(read("size_t", 1)[0]))  # ghost entities: (tag, partition) pairs
         counts = read("size_t", 4)
         for dim in range(4):
             for _ in range(int(counts[dim])):
                 tag = int(read("int", 1)[0])
+                parent = (dim, tag)
+                if partitioned:
+                    parent = tuple(int(v) for v in read("int", 2))
+                    read("int", int(read("size_t", 1)[0]))  # the partitions it is in
                 read("double", 3 if dim == 0 else 6)
                 n_physical = int(read("size_t", 1)[0])
-                out[dim][tag] = [int(t) for t in read("int", n_physical)]
+                out[dim][tag] = ([int(t) for t in read("int", n_physical)], parent)
                 if dim > 0:
                     read("int", int(read("size_t", 1)[0]))
         if not binary:
             read.done()
-        self._end("Entities")
+        self._end(section)
         return out
-
-    def _typed_binary(self, size_t: np.dtype):
-        types = {"int": np.dtype("<i4"), "size_t": size_t, "double": np.dtype("<f8")}
-
-        def read(kind: str, count: int) -> np.ndarray:
-            return self._binary(types[kind], count, "$Entities")
-        return read
 
     def nodes4(self, binary: bool, size_t: np.dtype) -> tuple[np.ndarray, np.ndarray]:
         """(tags (N,) int64, points (N, 3) float64) of a 4.1 $Nodes section."""
@@ -306,7 +335,7 @@ class _Reader:
                 block_tags = read("size_t", count)
                 per_node = 3 + (dim if parametric else 0)
                 xyz = read("double", count * per_node)
-            tags.append(block_tags.astype(np.int64))
+            tags.append(_tags(block_tags, "$Nodes"))
             points.append(xyz.reshape(count, per_node)[:, :3])
         if not binary:
             read.done()
@@ -320,8 +349,10 @@ class _Reader:
     def elements4(self, binary: bool, size_t: np.dtype, entities: tuple) -> dict:
         """Gmsh type -> (node tags (K, n) int64, entity tags (K,), physical tags (K,)) of a 4.1
         $Elements section (blocks of one type and entity, merged per type); an element is in
-        its entity's first physical group (entities: per dimension, entity tag -> physical
-        tags, from $Entities; 0 for none, or where $Entities does not list the entity)."""
+        its entity's first physical group, 0 for none (entities: Reader.entities' per
+        dimension; empty where the file has no $Entities).  A partitioned file's elements
+        take their parent entity's tag, and those on partition interfaces are left out."""
+        listed = any(entities)
         read = _Numbers(self._ascii_numbers("Elements"), "$Elements") if not binary else None
         header = self._binary(size_t, 4, "$Elements") if binary else read("size_t", 4)
         n_blocks, n_elements = int(header[0]), int(header[1])
@@ -335,13 +366,22 @@ class _Reader:
                 dim, entity, kind, count = (int(v) for v in read("int", 4))
             if kind not in NODES_PER_TYPE:
                 raise MshError(f"$Elements holds elements of Gmsh type {kind}, which paroct does not know")
+            if dim != TYPE_DIMENSION[kind]:
+                raise MshError(f"an $Elements block puts {type_name(kind)} elements on an entity of dimension {dim}")
             width = 1 + NODES_PER_TYPE[kind]
             rows = (self._binary(size_t, count * width, "$Elements") if binary
                     else read("size_t", count * width)).reshape(count, width)
-            groups = entities[dim].get(entity) if 0 <= dim <= 3 else None
-            blocks.setdefault(kind, []).append((rows[:, 1:].astype(np.int64), np.full(count, entity, dtype=np.int64),
-                                                np.full(count, groups[0] if groups else 0, dtype=np.int64)))
             total += count
+            physicals, parent = [], (dim, entity)
+            if listed:
+                if entity not in entities[dim]:
+                    raise MshError(f"an $Elements block names entity {entity} of dimension {dim}, which "
+                                   "$Entities does not list")
+                physicals, parent = entities[dim][entity]
+                if parent[0] != dim:  # a partition interface, no part of the model
+                    continue
+            blocks.setdefault(kind, []).append((_tags(rows[:, 1:], "$Elements"), np.full(count, parent[1], dtype=np.int64),
+                                                np.full(count, physicals[0] if physicals else 0, dtype=np.int64)))
         if not binary:
             read.done()
         self._end("Elements")
@@ -351,8 +391,12 @@ class _Reader:
 
     # --- MSH 2.2 ------------------------------------------------------------------------
 
-    def nodes2(self, binary: bool) -> tuple[np.ndarray, np.ndarray]:
-        """(tags (N,) int64, points (N, 3) float64) of a 2.2 $Nodes section."""
+    def nodes2(self, binary: bool, parametric: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(tags (N,) int64, points (N, 3) float64) of a 2.2 $Nodes section, or of a
+        $ParametricNodes one (Gmsh's Mesh.SaveParametric): 'tag x y z dim entity' and dim
+        parametric coordinates on a curve (1) or surface (2)."""
+        if parametric:
+            return self._parametric_nodes2(binary)
         count = self._count("Nodes")
         if binary:
             record = np.dtype([("tag", "<i4"), ("xyz", "<f8", (3,))])
@@ -365,6 +409,49 @@ class _Reader:
             tags, points = _integers(rows[:, 0], "$Nodes"), np.ascontiguousarray(rows[:, 1:])
         self._end("Nodes")
         return tags, points
+
+    def _parametric_nodes2(self, binary: bool) -> tuple[np.ndarray, np.ndarray]:
+        count = self._count("ParametricNodes")
+        tags, points = [], []
+        if binary:
+            done = 0
+            while done < count:  # runs of nodes on entities of one dimension: records of one size
+                if self.pos + 36 > len(self.data):
+                    raise MshError("the file ends inside $ParametricNodes")
+                dim = int(np.frombuffer(self.data, "<i4", 1, self.pos + 28)[0])
+                if not 0 <= dim <= 3:
+                    raise MshError(f"a $ParametricNodes node is on an entity of dimension {dim}")
+                record = np.dtype([("tag", "<i4"), ("xyz", "<f8", (3,)), ("dim", "<i4"), ("entity", "<i4"),
+                                   ("uv", "<f8", (dim if dim in (1, 2) else 0,))])
+                available = min(count - done, (len(self.data) - self.pos) // record.itemsize)
+                if available == 0:
+                    raise MshError("the file ends inside $ParametricNodes")
+                rows = np.frombuffer(self.data, record, available, self.pos)
+                n = _run_length(rows["dim"] != dim)
+                tags.append(rows["tag"][:n].astype(np.int64))
+                points.append(rows["xyz"][:n])
+                self.pos += n * record.itemsize
+                done += n
+        else:
+            values = self._ascii_numbers("ParametricNodes")
+            start = 0
+            while start < values.size:
+                if start + 6 > values.size:
+                    raise MshError("$ParametricNodes ends inside a node")
+                dim = values[start + 4]
+                if dim not in (0, 1, 2, 3):
+                    raise MshError(f"a $ParametricNodes node is on an entity of dimension {dim:g}")
+                width = 6 + (int(dim) if dim in (1, 2) else 0)
+                rows = values[start:start + (values.size - start) // width * width].reshape(-1, width)
+                n = _run_length(rows[:, 4] != dim)
+                tags.append(_integers(rows[:n, 0], "$ParametricNodes"))
+                points.append(rows[:n, 1:4])
+                start += n * width
+            if sum(t.size for t in tags) != count:
+                raise MshError(f"$ParametricNodes says it holds {count} nodes, it holds {sum(t.size for t in tags)}")
+        self._end("ParametricNodes")
+        return (np.concatenate(tags) if tags else np.zeros(0, dtype=np.int64),
+                np.concatenate(points).astype(np.float64) if points else np.zeros((0, 3)))
 
     def elements2(self, binary: bool) -> dict:
         """Gmsh type -> (node tags (K, n), elementary tags (K,), physical tags (K,)) of a 2.2
@@ -397,12 +484,12 @@ class _Reader:
             if listed != count:
                 raise MshError(f"$Elements says it holds {count} elements, it holds {listed}")
         self._end("Elements")
-        return {kind: _merged(runs) for kind, runs in parts.items()}
+        return {kind: _without_group_copies(*_merged(runs)) for kind, runs in parts.items()}
 
     def _count(self, name: str) -> int:
         line = self._line()
-        if not line.isdigit():
-            raise MshError(f"${name} starts with {line[:40]!r}, not a count")
+        if not _COUNT.fullmatch(line):
+            raise MshError(f"${name} starts with {_shown(line)}, not a count")
         return int(line)
 
 
@@ -432,12 +519,30 @@ class _Numbers:
 
 
 def _integers(values: np.ndarray, section: str) -> np.ndarray:
-    """float64 values as int64; MshError for one that is not a whole number within 2**53."""
+    """float64 values (read from text) as int64; MshError for one that is not a whole number,
+    or whose magnitude reaches 2**53 (from there float64 rounds whole numbers)."""
+    large = np.abs(values) >= 2.0 ** 53
+    if large.any():
+        raise MshError(f"{section} holds {float(values[large][0]):.17g}, beyond the 2**53 paroct reads in a text file")
     ints = values.astype(np.int64)
-    bad = (ints != values) | (np.abs(values) > 2.0 ** 53)
+    bad = ints != values
     if bad.any():
         raise MshError(f"{section} holds {float(values[bad][0]):g} where a whole number belongs")
     return ints
+
+
+def _tags(values: np.ndarray, section: str) -> np.ndarray:
+    """Unsigned binary tags as int64; MshError for one of 2**63 or more."""
+    if values.dtype.kind == "u" and values.size and int(values.max()) >= 2 ** 63:
+        raise MshError(f"{section} holds tag {int(values.max())}, beyond 2**63")
+    return values.astype(np.int64)
+
+
+def _run_length(differs: np.ndarray) -> int:
+    """Rows before the first True of differs (all of them if none; at least 1: row 0 starts
+    the run)."""
+    first = np.flatnonzero(differs[1:])
+    return int(first[0]) + 1 if first.size else max(int(differs.size), 1)
 
 
 def _run2(values: np.ndarray, start: int) -> tuple[int, int, int, int]:
@@ -473,6 +578,26 @@ def _tagged2(rows: np.ndarray, first: int, n_tags: int) -> tuple[np.ndarray, np.
     physical = rows[:, first] if n_tags >= 1 else zero
     entity = rows[:, first + 1] if n_tags >= 2 else zero
     return np.ascontiguousarray(rows[:, first + n_tags:]), entity.copy(), physical.copy()
+
+
+def _without_group_copies(nodes: np.ndarray, entity: np.ndarray, physical: np.ndarray) -> tuple:
+    """MSH 2 lists an element once per physical group it is in (Gmsh's writer): the copies,
+    rows of the same nodes and entity in another group, are dropped, the first kept (its
+    group is the element's, as MSH 4.1 gives the entity's first).  Rows repeated in one
+    group stay: a file's duplicate elements are the file's."""
+    if nodes.shape[0] < 2:
+        return nodes, entity, physical
+    key = np.column_stack([nodes, entity])
+    order = np.lexsort(key.T[::-1])
+    same = np.all(key[order[1:]] == key[order[:-1]], axis=1)
+    if not same.any():
+        return nodes, entity, physical
+    run_start = np.maximum.accumulate(np.where(np.concatenate([[False], same]), 0, np.arange(order.size)))
+    first = order[run_start]  # per sorted row, the first row (lowest index: lexsort is stable) of its run
+    copy = np.zeros(nodes.shape[0], dtype=bool)
+    copy[order] = physical[order] != physical[first]
+    keep = ~copy
+    return nodes[keep], entity[keep], physical[keep]
 
 
 def _merged(parts: list) -> tuple:
