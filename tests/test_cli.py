@@ -380,3 +380,34 @@ def test_the_program_lets_idle_threads_sleep_unless_told_otherwise(monkeypatch, 
     monkeypatch.setattr(cli, "main", main)
     assert cli.console_main() == 0
     assert seen["policy"] == want
+
+
+def test_status_line_shows_long_runs_only_and_is_erased_before_other_output(monkeypatch):
+    """On a terminal a run says which stage ended once it has taken StatusLine.SHOW_AFTER
+    seconds, on one line rewritten in place; a message erases the line first, so nothing is
+    printed after it on the same line."""
+    import io
+
+    from paroct import cli
+
+    now = [0.0]
+    stream = io.StringIO()
+    status = cli.StatusLine(stream, clock=lambda: now[0])
+    status("load")  # at 0 s: a short run shows nothing
+    now[0] = 0.5
+    status("octree")
+    assert stream.getvalue() == "" and not status.shown
+    now[0] = 1.25
+    status("stuff")
+    assert stream.getvalue() == "\r\x1b[Kparoct: stuff done (1.2 s)" and status.shown
+    now[0] = 2.0
+    status.show("writing part.vtu")
+    assert stream.getvalue().endswith("\r\x1b[Kparoct: writing part.vtu (2.0 s)")
+    err = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", err)
+    monkeypatch.setattr(cli, "_status", status)
+    cli._err("warning: something")
+    assert stream.getvalue().endswith("\r\x1b[K") and not status.shown
+    assert err.getvalue() == "paroct: warning: something\n"
+    status.clear()  # nothing shown: nothing to erase
+    assert stream.getvalue().endswith("(2.0 s)\r\x1b[K")

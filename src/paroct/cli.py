@@ -52,7 +52,41 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _err(message: str) -> None:
+    if _status is not None:
+        _status.clear()
     print(f"paroct: {message}", file=sys.stderr, flush=True)
+
+
+class StatusLine:
+    """What a long run is doing, on one terminal line that is rewritten in place: nothing for
+    the first SHOW_AFTER seconds (short runs print nothing), then the last stage that ended
+    and the time so far.  Called with a stage's name as mesh()'s progress; clear() erases the
+    line before other output."""
+
+    SHOW_AFTER = 1.0
+
+    def __init__(self, stream, clock=time.perf_counter):
+        self.stream, self.clock, self.start, self.shown = stream, clock, clock(), False
+
+    def __call__(self, stage: str) -> None:
+        self.show(f"{stage} done")
+
+    def show(self, what: str) -> None:
+        elapsed = self.clock() - self.start
+        if elapsed >= self.SHOW_AFTER:
+            self.stream.write(f"\r\x1b[Kparoct: {what} ({elapsed:.1f} s)")
+            self.stream.flush()
+            self.shown = True
+
+    def clear(self) -> None:
+        if self.shown:
+            self.stream.write("\r\x1b[K")
+            self.stream.flush()
+            self.shown = False
+
+
+#: The status line of the run in progress, if stderr is a terminal (_err clears it first).
+_status: StatusLine | None = None
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -245,29 +279,46 @@ def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_siz
     from .sizing import Box, Sphere
     from .surface import load_surface
 
+    global _status
+
     def progress(stage: str) -> None:
         _err(f"{stage} done")
 
+    status = None
+    if not (args.quiet or args.verbose) and sys.stderr.isatty() and os.environ.get("TERM") != "dumb":
+        status = StatusLine(sys.stderr)
     if not args.quiet and not _kernels_cached():
         _err("compiling the numba kernels on this first run (about a minute on 2 cores; cached afterwards)")
     memory_start = start_peak_count() if args.verbose else None
     t0 = time.perf_counter()
     regions = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
     regions += [Sphere(center=tuple(b[:3]), radius=b[3], size=b[4]) for b in args.refine_sphere]
-    surface = load_surface(source)
-    t_loaded = time.perf_counter()
-    max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
-    result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
-                  curvature=args.curvature, layers=args.layers, patch_sizes=patch_sizes,
-                  thin_features=not args.keep_size, min_size=args.min_size,
-                  max_memory=max_memory, progress=progress if args.verbose else None)
-    if args.sharp_edges is not None:
-        result = result.with_sharp_edges(None if args.sharp_edges is _INPUT_GROUPS else args.sharp_edges)
-    boundary = None if args.patches is None else result.boundary_patches(
-        None if args.patches is _INPUT_GROUPS else args.patches)
-    t1 = time.perf_counter()
-    write_mesh(out, result.mesh.points, result.mesh.tets, boundary=boundary)
-    t2 = time.perf_counter()
+    _status = status
+    try:
+        surface = load_surface(source)
+        t_loaded = time.perf_counter()
+        max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
+        result = mesh(surface, args.size, divisions=args.divisions, max_size=max_size, regions=regions,
+                      curvature=args.curvature, layers=args.layers, patch_sizes=patch_sizes,
+                      thin_features=not args.keep_size, min_size=args.min_size,
+                      max_memory=max_memory, progress=progress if args.verbose else status)
+        if args.sharp_edges is not None:
+            if status is not None:
+                status.show("moving the boundary onto sharp edges")
+            result = result.with_sharp_edges(None if args.sharp_edges is _INPUT_GROUPS else args.sharp_edges)
+        if args.patches is not None and status is not None:
+            status.show("splitting the boundary into patches")
+        boundary = None if args.patches is None else result.boundary_patches(
+            None if args.patches is _INPUT_GROUPS else args.patches)
+        t1 = time.perf_counter()
+        if status is not None:
+            status.show(f"writing {out}")
+        write_mesh(out, result.mesh.points, result.mesh.tets, boundary=boundary)
+        t2 = time.perf_counter()
+    finally:
+        if status is not None:
+            status.clear()
+        _status = None
     peak = peak_resident() if memory_start is not None else None
     report = result.report
     for warning in report.warnings:
