@@ -411,3 +411,6 @@ def test_status_line_shows_long_runs_only_and_is_erased_before_other_output(monk
     assert err.getvalue() == "paroct: warning: something\n"
     status.clear()  # nothing shown: nothing to erase
     assert stream.getvalue().endswith("(2.0 s)\r\x1b[K")
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # not a terminal: no status line at all
+    with cli._terminal_status(True) as off:
+        assert off is None and cli._status is None

@@ -89,6 +89,23 @@ class StatusLine:
 _status: StatusLine | None = None
 
 
+@contextlib.contextmanager
+def _terminal_status(enabled: bool):
+    """A StatusLine on stderr while the block runs, if enabled and stderr is a terminal
+    (else None); erased when the block ends, also by an error."""
+    global _status
+    status = None
+    if enabled and sys.stderr.isatty() and os.environ.get("TERM") != "dumb":
+        status = StatusLine(sys.stderr)
+    _status = status
+    try:
+        yield status
+    finally:
+        if status is not None:
+            status.clear()
+        _status = None
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     _err(f"warning: {_one_line(message)}")
 
@@ -279,22 +296,16 @@ def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_siz
     from .sizing import Box, Sphere
     from .surface import load_surface
 
-    global _status
-
     def progress(stage: str) -> None:
         _err(f"{stage} done")
 
-    status = None
-    if not (args.quiet or args.verbose) and sys.stderr.isatty() and os.environ.get("TERM") != "dumb":
-        status = StatusLine(sys.stderr)
     if not args.quiet and not _kernels_cached():
         _err("compiling the numba kernels on this first run (about a minute on 2 cores; cached afterwards)")
     memory_start = start_peak_count() if args.verbose else None
     t0 = time.perf_counter()
     regions = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
     regions += [Sphere(center=tuple(b[:3]), radius=b[3], size=b[4]) for b in args.refine_sphere]
-    _status = status
-    try:
+    with _terminal_status(not (args.quiet or args.verbose)) as status:
         surface = load_surface(source)
         t_loaded = time.perf_counter()
         max_size = resolve_size(surface, args.size, args.divisions) if args.uniform else args.max_size
@@ -315,10 +326,6 @@ def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_siz
             status.show(f"writing {out}")
         write_mesh(out, result.mesh.points, result.mesh.tets, boundary=boundary)
         t2 = time.perf_counter()
-    finally:
-        if status is not None:
-            status.clear()
-        _status = None
     peak = peak_resident() if memory_start is not None else None
     report = result.report
     for warning in report.warnings:
@@ -515,9 +522,12 @@ def _run_check(args: argparse.Namespace) -> int:
     from .io import read_mesh
     from .surface import load_surface
 
-    points, tets = read_mesh(args.mesh)
-    surface = load_surface(args.against) if args.against else None
-    report = check_mesh(points, tets, surface)
+    with _terminal_status(True) as status:
+        points, tets = read_mesh(args.mesh)
+        surface = load_surface(args.against) if args.against else None
+        if status is not None:
+            status.show(f"checking {len(tets)} tets")
+        report = check_mesh(points, tets, surface)
     print(report.format())
     return EXIT_OK if report.ok else EXIT_CHECK_FAILED
 
