@@ -407,14 +407,15 @@ def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
     return alive
 
 
-def star_violation(lattice_points, coords, tets, inside, cuts, targets, star, bound) -> float:
+def star_violation(lattice_points, coords, tets, inside, cuts, targets, star, bound, first_centre=None) -> float:
     """Worst violation of bound (degrees) over the tets stuffing gives the lattice tets star
     (indices into tets) with these warps, by stuffing just them and measuring every tet; 180
     if one is folded or flat (an angle of 0 or 180 degrees).  The twin of stuffing._star_score."""
     from paroct.quality import tet_quality
     from paroct.stuffing import stuff
 
-    points, out, _ = stuff(lattice_points, coords, tets[star], inside, cuts, targets, flat_ok=True)
+    points, out, _ = stuff(lattice_points, coords, tets[star], inside, cuts, targets, flat_ok=True,
+                           first_centre=first_centre)
     q = tet_quality(points, out)
     if np.any(q.volume <= 0) or np.any(q.min_dihedral <= 0) or np.any(q.max_dihedral >= 180):
         return 180.0
@@ -493,7 +494,7 @@ def group_by_vertex(vertices: np.ndarray, owners: np.ndarray) -> list[list[int]]
 
 
 def retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points, inside,
-             coords, table, prism, lo, hi, min_ratio, sweeps):
+             coords, first_centre, table, prism, lo, hi, min_ratio, sweeps):
     """stuffing._retarget without skipping any vertex: each sweep scores every vertex's star
     and, where it is bad, tries every option (in place, as _retarget)."""
     from paroct.stuffing import _set_warp, _star_score
@@ -502,7 +503,7 @@ def retarget(vertices, star_first, stars, option_first, options, tets, signs, ta
         moved = 0
         for i, v in enumerate(vertices):
             star = stars[star_first[i]:star_first[i + 1]]
-            score = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+            score = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
             if score[0] <= 0 and score[1] >= min_ratio:
                 continue
             current = best_target = targets[v]
@@ -511,7 +512,7 @@ def retarget(vertices, star_first, stars, option_first, options, tets, signs, ta
                 if e == current:
                     continue
                 _set_warp(v, e, signs, targets, points, lattice_points, inside)
-                w, r = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+                w, r = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
                 if w < best[0] or (w == best[0] and r > best[1]):
                     best, best_target = (w, r), e
             _set_warp(v, best_target, signs, targets, points, lattice_points, inside)

@@ -70,10 +70,11 @@ def _on_box(coords):
     return ((coords == coords.min(axis=0)) | (coords == coords.max(axis=0))).any(axis=1)
 
 
-def _stuff(coords, tets, phi, fracs_of, warp, spacing=None):
-    """Stuff as _cuts_and_warps sets up; returns (lattice points in space, output points, output tets)."""
+def _stuff(coords, tets, phi, fracs_of, warp, spacing=None, first_centre=None):
+    """Stuff as _cuts_and_warps sets up; returns (lattice points in space, output points, output
+    tets).  first_centre: LeafVertices.first_centre of a graded octree's vertices."""
     x, inside, cuts, targets = _cuts_and_warps(coords, tets, phi, fracs_of, warp, spacing)
-    points, out, _ = stuff(x, coords, tets, inside, cuts, targets)
+    points, out, _ = stuff(x, coords, tets, inside, cuts, targets, first_centre=first_centre)
     return x, points, out
 
 
@@ -118,11 +119,11 @@ def _on_hull(tri_points, coords):
     return out
 
 
-def _check_plane_cut(coords, tets, normal, offset, warp, spacing=None):
+def _check_plane_cut(coords, tets, normal, offset, warp, spacing=None, first_centre=None):
     """Stuff against a plane and check: positive tets, every interior face shared by two tets
     on opposite sides, boundary faces on the plane or the box, volume the clipped volume."""
     phi, fracs = _plane(coords, normal, offset)
-    x, points, out = _stuff(coords, tets, phi, fracs, warp, spacing)
+    x, points, out = _stuff(coords, tets, phi, fracs, warp, spacing, first_centre)
     q = tet_quality(points, out)
     assert np.all(q.volume > 0)
     tri = _boundary_triangles(points, out)
@@ -165,7 +166,8 @@ def test_uniform_lattice_keeps_the_labelle_shewchuk_bound(seed):
 @pytest.mark.parametrize("warp", [False, True])
 def test_graded_octrees_stuff_conforming_with_the_clipped_volume(seed, warp):
     """Coarse fat tets and transition templates are cut too: faces off the finest lattice take
-    the rule of the lattice they lie in, or the quad diagonal at the smaller vertex id.  With
+    the rule of the lattice they lie in, or the template rule (corners, then face centres that
+    are no leaf's corner, each by coordinates: stuffing._vertex_before).  With
     warps (warp_targets' rule for template edges and vertices shared with finer leaves; no
     angle bound is proven there, docs/thin_study measures it) every tet stays positive."""
     rng = np.random.default_rng(1000 + seed)
@@ -175,7 +177,7 @@ def test_graded_octrees_stuff_conforming_with_the_clipped_volume(seed, warp):
     spacing = lattice.vertex_spacing(vertices, sides)
     for _ in range(20):
         normal, offset = _random_plane(rng, coords)
-        _check_plane_cut(coords, tets, normal, offset, warp, spacing)
+        _check_plane_cut(coords, tets, normal, offset, warp, spacing, vertices.first_centre)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -213,20 +215,65 @@ def test_quad_rules_never_cycle_on_lattice_and_template_tets(seed):
     """Every tet of a random balanced octree with every one of its vertices outside (a +++-
     prism, whose three quads all lie on faces of the tet): the face rules never cycle, so
     three tets always fill the prism.  Each case gets its own copy of the tet's vertices,
-    numbered in the original order (the rule off the lattices compares vertex ids)."""
+    the face centres that are no leaf's corner last, as number_vertices numbers them (the
+    rule off the lattices puts those last).  (3000 such trees of 3-6 levels: none cycled.)"""
     anchors, sides = _random_balanced_tree(seed, 3 + seed % 3)
-    coords, tets = lattice.leaf_tets(anchors, sides)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
     n = tets.shape[0]
     rank = np.empty(4 * n, dtype=np.int64)
     rank[np.argsort(tets.ravel(), kind="stable")] = np.arange(4 * n)
     copies = rank.reshape(n, 4)
     copy_coords = np.empty((4 * n, 3), dtype=np.int64)
     copy_coords[copies] = coords[tets]
+    first_centre = int(np.count_nonzero(tets < vertices.first_centre))
+    assert first_centre < 4 * n  # templates with face centres are among the tets
     for outside in range(4):
         phi = np.ones(4 * n)
         phi[copies[:, outside]] = -1.0
-        x, points, out = _stuff(copy_coords, copies, phi, lambda x, s, e: np.full(s.shape[0], 0.5), warp=False)
+        x, points, out = _stuff(copy_coords, copies, phi, lambda x, s, e: np.full(s.shape[0], 0.5), warp=False,
+                                first_centre=first_centre)
         assert out.shape[0] == 3 * n
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_stuffed_graded_octrees_do_not_depend_on_how_the_corners_are_numbered(seed):
+    """A graded octree cut by spheres, stuffed with its vertices as number_vertices numbers
+    them and with the leaf corners numbered at random (the face centres that are no leaf's
+    corner still last, first_centre the same): the same tets, point for point.  The cut
+    edges, warps and the quad rule on lattice and template faces follow the coordinates."""
+    rng = np.random.default_rng(seed)
+    anchors, sides = _random_balanced_tree(seed, 4 + seed % 2)
+    vertices = lattice.number_vertices(anchors, sides)
+    coords, tets = vertices.coords, lattice.graded_tets(vertices)
+    spacing = lattice.vertex_spacing(vertices, sides)
+    first_centre = vertices.first_centre
+    new_id = np.concatenate([rng.permutation(first_centre), np.arange(first_centre, coords.shape[0])])
+    x = coords @ LATTICE_TO_SPACE.T
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    templates = 0
+    for _ in range(5):
+        centre = rng.uniform(lo + 0.25 * (hi - lo), hi - 0.25 * (hi - lo))
+        phi, fracs = _sphere(coords, centre, rng.uniform(1.0, 0.4 * (hi - lo).min()))
+        meshes = []
+        for ids in (np.arange(coords.shape[0]), new_id):
+            order = np.argsort(ids)  # the old vertex of each new id
+            _, points, out = _stuff(coords[order], ids[tets], phi[order], fracs, True, spacing[order], first_centre)
+            meshes.append(_canonical_tets(points, out))
+        assert meshes[0].shape == meshes[1].shape and np.array_equal(meshes[0], meshes[1])
+        signs = phi[tets] > 0
+        cut = signs.any(axis=1) & ~signs.all(axis=1)
+        templates += int(np.count_nonzero(cut & np.any(tets >= first_centre, axis=1)))
+    assert templates > 0  # cut tets with a face centre: the quad rule on template faces was asked
+
+
+def _canonical_tets(points, out):
+    """The tets' corner positions (M, 12), each tet's corners in lexicographic order and the
+    tets sorted: equal for the same tets however the points are numbered."""
+    p = np.ascontiguousarray(np.round(points[out], 9))
+    corners = np.sort(p.view([("x", "f8"), ("y", "f8"), ("z", "f8")]).reshape(p.shape[0], 4), axis=1)
+    flat = corners.view("f8").reshape(p.shape[0], 12)
+    return flat[np.lexsort(flat.T[::-1])]
 
 
 def test_stuff_orients_by_the_volume_before_the_warps():
@@ -271,8 +318,9 @@ def test_star_score_is_the_worst_violation_of_the_stuffed_star(seed):
                 trial = targets.copy()
                 trial[v] = e
                 points, signs = _warped(x, inside, cuts, trial)
-                worst, _ = _star_score(star, tets, signs, points, x, coords, cuts.table, PRISM_TETS, *DIHEDRAL_BOUND)
-                naive = star_violation(x, coords, tets, inside, cuts, trial, star, DIHEDRAL_BOUND)
+                worst, _ = _star_score(star, tets, signs, points, x, coords, vertices.first_centre, cuts.table, PRISM_TETS,
+                                          *DIHEDRAL_BOUND)
+                naive = star_violation(x, coords, tets, inside, cuts, trial, star, DIHEDRAL_BOUND, vertices.first_centre)
                 assert worst == pytest.approx(naive, abs=1e-9)
                 checked += 1
     assert checked >= 64
@@ -289,7 +337,9 @@ def _sphere_cuts(seed, k):
     centre = rng.uniform(lo + 0.25 * (hi - lo), hi - 0.25 * (hi - lo))
     radius = rng.uniform(1.0, 0.4 * (hi - lo).min())
     phi, fracs = _sphere(coords, centre, radius)
-    return coords, tets, (centre, radius), _cuts_and_warps(coords, tets, phi, fracs, True, lattice.vertex_spacing(vertices, sides))
+    return (coords, tets, (centre, radius), _cuts_and_warps(coords, tets, phi, fracs, True,
+                                                            lattice.vertex_spacing(vertices, sides)),
+            vertices.first_centre)
 
 
 def _violations(points, out, coords):
@@ -312,7 +362,7 @@ def _radius_ratios(points, out, coords):
 
 def test_warped_moves_the_warped_vertices_onto_their_cut_points_and_appends_the_cut_points():
     k = next(k for k in range(20) if (_sphere_cuts(0, k)[3][3] >= 0).any())
-    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(0, k)
+    coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(0, k)
     points, signs = _warped(x, inside, cuts, targets)
     want = np.concatenate([x, cuts.points])
     want[: x.shape[0]][targets >= 0] = cuts.points[targets[targets >= 0]]
@@ -373,7 +423,7 @@ def test_cut_edges_of_lattices_cut_by_a_sphere(seed):
     """A graded octree's coarse and template edges, and a uniform block's unit edges of all
     seven directions, each edge in several tets."""
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
-    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+    coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
     assert (_check_cut_edges(tets, inside, coords) < 0).all()
     anchors = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
     anchors = anchors[np.argsort(morton_keys(anchors))]
@@ -389,7 +439,7 @@ def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
     """The parallel driver hands chunks of lattice tets to the serial kernel: same tets, same
     touched flags, for every prefix of the lattice tets (down to fewer tets than chunks)."""
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
-    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
+    coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
     signs = _signs(inside, targets)
     for n in (tets.shape[0], 37, 1):
         part = np.ascontiguousarray(tets[:n])
@@ -399,7 +449,8 @@ def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
         for kernel in (_stencils, _stencils_in_chunks):
             out = np.full((int(offsets[-1]), 4), -1, dtype=np.int32)
             touched = np.zeros(out.shape[0], dtype=np.bool_)
-            assert kernel(part, signs, coords, cuts.table, coords.shape[0], PRISM_TETS, offsets, out, touched) == 0
+            assert kernel(part, signs, coords, first_centre, cuts.table, coords.shape[0], PRISM_TETS, offsets, out,
+                          touched) == 0
             outputs.append((out, touched))
         assert np.array_equal(outputs[0][0], outputs[1][0]) and np.array_equal(outputs[0][1], outputs[1][1])
         assert (outputs[0][0] >= 0).all()
@@ -412,8 +463,8 @@ def test_restuff_gives_what_stuff_gives_and_keeps_the_flags_of_the_tets_it_kept(
     keep their flags, the ones stuffed again (named by again) get 0."""
     rng = np.random.default_rng(500 + seed)
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
-    coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-    points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+    coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
+    points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True, first_centre=first_centre)
     flags = rng.integers(1, 256, out.shape[0]).astype(np.uint8)
     grown = shrunk = 0
     for _ in range(6):
@@ -425,10 +476,10 @@ def test_restuff_gives_what_stuff_gives_and_keeps_the_flags_of_the_tets_it_kept(
         other = np.where(new >= 0, np.where(cuts.starts[np.maximum(new, 0)] == np.arange(len(new)),
                                             cuts.ends[np.maximum(new, 0)], cuts.starts[np.maximum(new, 0)]), -1)
         new[(new >= 0) & (new[np.maximum(other, 0)] == new)] = -1  # both ends onto one cut point: none
-        want_points, want, want_offsets = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+        want_points, want, want_offsets = stuff(x, coords, tets, inside, cuts, new, flat_ok=True, first_centre=first_centre)
         before, before_flags, before_offsets = out.copy(), flags.copy(), offsets.copy()
         got_points, got, again, got_offsets, got_flags = restuff(x, coords, tets, inside, cuts, targets, out, new,
-                                                                 offsets=offsets, flat_ok=True, flags=flags)
+                                                                 offsets=offsets, first_centre=first_centre, flat_ok=True, flags=flags)
         assert np.array_equal(got_points, want_points) and np.array_equal(got, want)
         assert np.array_equal(got_offsets, want_offsets)
         # Flags follow their tets; the tets stuffed again are exactly those through a vertex
@@ -540,7 +591,7 @@ def test_star_options_are_each_vertex_cut_edges_in_order(seed):
     rng = np.random.default_rng(950 + seed)
     found = 0
     for k in range(4):
-        coords, tets, _, (x, inside, cuts, _) = _sphere_cuts(seed, k)
+        coords, tets, _, (x, inside, cuts, _), first_centre = _sphere_cuts(seed, k)
         ends = np.unique(np.concatenate([cuts.starts, cuts.ends]))
         vertices = np.unique(np.concatenate([rng.choice(ends, size=min(40, ends.size), replace=False),
                                              rng.integers(0, x.shape[0], 10)])).astype(np.int64)
@@ -560,8 +611,8 @@ def test_retarget_skips_only_stars_that_did_not_change(seed):
     exactly, on spheres where some vertices move more than once."""
     moved = 0
     for k in range(6):
-        coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-        points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+        coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
+        points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True, first_centre=first_centre)
         worst = _violations(points, out, coords) + (_radius_ratios(points, out, coords) < 0.15)
         if not worst.any():
             continue
@@ -573,7 +624,8 @@ def test_retarget_skips_only_stars_that_did_not_change(seed):
         for search in (_retarget, naive_retarget):
             new, signs, warped = targets.copy(), _signs(inside, targets), points.copy()
             search(vertices, star_first, stars, option_first, options, tets, signs, new, warped, x, inside, coords,
-                   cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], 0.15, stuffing.RETARGET_SWEEPS)
+                   first_centre, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], 0.15,
+                   stuffing.RETARGET_SWEEPS)
             results.append((new, signs, warped))
         for a, b in zip(*results):
             np.testing.assert_array_equal(a, b)
@@ -591,15 +643,15 @@ def test_retarget_warps_mends_needles_and_keeps_the_bound_first():
     before = after = pure = 0
     for seed in range(8):
         for k in range(10):
-            coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True, first_centre=first_centre)
             worst, ratio = _violations(points, out, coords), _radius_ratios(points, out, coords)
             needles = np.nonzero((worst == 0) & (ratio < floor))[0]
             if needles.size == 0:
                 continue
             new = retarget_warps(x, coords, tets, inside, cuts, targets, np.union1d(np.nonzero(worst)[0], needles), floor,
-                                 offsets=offsets).targets
-            points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+                                 offsets=offsets, first_centre=first_centre).targets
+            points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True, first_centre=first_centre)
             mended, mended_ratio = _violations(points, out, coords), _radius_ratios(points, out, coords)
             assert mended.max() <= worst.max() + 1e-9
             if not worst.any():
@@ -619,12 +671,12 @@ def test_retarget_warps_names_the_tets_to_stuff_again_and_a_settled_search_moves
     settled = searched_again = 0
     for seed in range(8):
         for k in range(10):
-            coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True, first_centre=first_centre)
             bad = np.nonzero(_violations(points, out, coords))[0]
             if bad.size == 0:
                 continue
-            found = retarget_warps(x, coords, tets, inside, cuts, targets, bad, 0.15, offsets=offsets, points=points)
+            found = retarget_warps(x, coords, tets, inside, cuts, targets, bad, 0.15, offsets=offsets, first_centre=first_centre, points=points)
             changed = found.targets != targets
             assert found.changed == np.count_nonzero(changed)
             np.testing.assert_array_equal(found.rows, np.flatnonzero(touching(tets, changed)))
@@ -637,10 +689,10 @@ def test_retarget_warps_names_the_tets_to_stuff_again_and_a_settled_search_moves
             # Lattice tets of searched vertices only, with stuffed tets to name them by.
             subset = np.flatnonzero(np.isin(tets, found.searched).all(axis=1) & (np.diff(offsets) > 0))
             some = rng.choice(subset, min(subset.size, 5), replace=False)
-            again = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets,
+            again = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets, first_centre=first_centre,
                                    points=points)
             assert again.changed == 0 and again.rows.size == 0
-            skipped = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets,
+            skipped = retarget_warps(x, coords, tets, inside, cuts, found.targets, offsets[some], 0.15, offsets=offsets, first_centre=first_centre,
                                      points=points, settled=found.searched)  # the search _mend skips
             assert skipped.changed == 0 and skipped.targets is found.targets
             np.testing.assert_array_equal(skipped.searched, again.searched)
@@ -655,11 +707,11 @@ def test_a_search_of_one_sweep_settles_only_if_it_moves_nothing(monkeypatch):
     outcomes = set()
     for seed in range(4):
         for k in range(10):
-            coords, tets, _, (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True, first_centre=first_centre)
             bad = np.nonzero(_violations(points, out, coords))[0]
             if bad.size:
-                found = retarget_warps(x, coords, tets, inside, cuts, targets, bad, 0.15, offsets=offsets)
+                found = retarget_warps(x, coords, tets, inside, cuts, targets, bad, 0.15, offsets=offsets, first_centre=first_centre)
                 assert found.settled == (found.changed == 0)
                 outcomes.add(found.settled)
     assert False in outcomes  # searches that moved vertices were seen
@@ -675,12 +727,12 @@ def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_
     before = after = 0
     for seed in range(8):
         for k in range(10):
-            coords, tets, (centre, radius), (x, inside, cuts, targets) = _sphere_cuts(seed, k)
-            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True)
+            coords, tets, (centre, radius), (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
+            points, out, offsets = stuff(x, coords, tets, inside, cuts, targets, flat_ok=True, first_centre=first_centre)
             worst = _violations(points, out, coords)
             if not worst.any():
                 continue
-            found = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0], offsets=offsets)
+            found = retarget_warps(x, coords, tets, inside, cuts, targets, np.nonzero(worst)[0], offsets=offsets, first_centre=first_centre)
             new, changed = found.targets, found.changed
             # Only vertices of the lattice tets that gave bad tets move: each shares a lattice
             # tet with a lattice vertex or cut edge end of a bad tet.
@@ -690,7 +742,7 @@ def test_retarget_warps_mends_most_tets_outside_the_bound_and_never_worsens_the_
             near = np.unique(tets[np.isin(tets, seen).any(axis=1)])
             moved = np.nonzero(new != targets)[0]
             assert changed == moved.size and np.isin(moved, near).all()
-            points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True)
+            points, out, _ = stuff(x, coords, tets, inside, cuts, new, flat_ok=True, first_centre=first_centre)
             mended = _violations(points, out, coords)
             assert mended.max() <= worst.max() + 1e-9
             before, after = before + np.count_nonzero(worst), after + np.count_nonzero(mended)

@@ -544,12 +544,16 @@ class LeafVertices:
     split_ids: (C, 18) int32, vertex id of each split point (transitions.SPLIT_POINT_OFFSETS),
     -1 where the point is not a vertex.
     coords: (V, 3) int64 lattice coordinates of the vertices (finest-level units).
+    first_centre: the vertices from this id up are face centres that are no leaf's corner
+    (numbered last; V if there are none): stuffing's quad rule on template faces puts them
+    last (stuffing._quad_first_diagonal).
     """
 
     corner_ids: np.ndarray
     split_row: np.ndarray
     split_ids: np.ndarray
     coords: np.ndarray
+    first_centre: int
 
 
 @nb.njit(cache=True)
@@ -618,6 +622,7 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
     stride = np.array([1, bricks[0], bricks[0] * bricks[1]], dtype=np.int64)
     table, bits, corner_ids, coords, count = _number_corner_vertices(table, bits, anchors, sides, prefix, box_lo,
                                                                      stride, directory, 6 * coarse.shape[0])
+    first_centre = int(count)  # edge midpoints are corners of finer leaves: every corner is numbered
     split_ids = np.empty((coarse.shape[0], 18), dtype=np.int32)
     # Serial and parallel kernels called in turn from here, not one from another: a parallel
     # kernel called from a cached one segfaults when loaded from the cache (numba issue #8578).
@@ -635,7 +640,7 @@ def number_vertices(anchors: np.ndarray, sides: np.ndarray, prefix: np.ndarray |
                                                      count)
     _face_centre_ids(table, bits, stride, box_lo, directory, anchors, sides, SPLIT_POINT_OFFSETS, coarse, split_ids,
                      eager, *rules, True)
-    return LeafVertices(corner_ids, split_row, split_ids, coords)
+    return LeafVertices(corner_ids, split_row, split_ids, coords, first_centre)
 
 
 def vertex_spacing(vertices: LeafVertices, sides: np.ndarray) -> np.ndarray:

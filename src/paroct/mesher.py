@@ -753,7 +753,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     # minimal face-centre rule's fewer tets can be had.
     vertices = number_vertices(octant_lattice_anchors(keys, frame), np.int64(1) << (frame.levels - levels.astype(np.int64)),
                                prefix=band.coords, eager=False)
-    coords = vertices.coords
+    coords, first_centre = vertices.coords, vertices.first_centre
     n_band = band.coords.shape[0]
     inside = vertex_classes(vertices, band.inside)
     stages.done("classify")
@@ -768,11 +768,12 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     # split ids, the leaves and the band's cells are freed before it allocates its output.
     del vertices, band, keys, levels
     lattice_points = frame.to_space(coords)
-    points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=mend)
+    points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=mend,
+                                      first_centre=first_centre)
     stages.done("stuff")
     if mend:
-        points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, tets, inside, cuts, targets, points,
-                                                          out_tets, offsets)
+        points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, first_centre, tets, inside, cuts,
+                                                          targets, points, out_tets, offsets)
         report.bad_tets = int(np.count_nonzero((flags & OUTSIDE) != 0))
         stages.done("warps")
     # The lattice's tets and coordinates and the cut-edge tables are done with: freed before
@@ -1118,7 +1119,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     # Stuffing cuts the templates of band leaves here: the eager rule's, on which its quad rule
     # never cycles; the other leaves keep the minimal rule's fewer tets.
     vertices = number_vertices(octant_lattice_anchors(keys, frame), sides, eager=in_band)
-    coords = vertices.coords
+    coords, first_centre = vertices.coords, vertices.first_centre
     inside = np.ones(coords.shape[0], dtype=bool)
     ids = _band_vertex_ids(vertices, in_band)
     inside[ids] = rays.winding_numbers(crossings[X_AXIS_DIRECTION], np.take(coords, ids, axis=0)) > 0
@@ -1135,14 +1136,15 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report, buckets)
     targets = warp_targets(cuts, coords, frame.h, spacing)
     lattice_points = frame.to_space(coords)
-    points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True)
+    points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True,
+                                      first_centre=first_centre)
     stages.done("stuff")
 
     # Measured before the pinch repair, which needs a mesh that does not fold: a band that
     # changes level may give tets outside the bound.  Other warps near them mend most; where
     # they do not, this pass only says where the band must be finer.
-    points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, tets, inside, cuts, targets, points,
-                                                      out_tets, offsets)
+    points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, first_centre, tets, inside, cuts,
+                                                      targets, points, out_tets, offsets)
     # != 0: np.flatnonzero of a bool mask is 20x faster than of uint8 (0.4 vs 8 ms on
     # fea_part's 2.7 M tets at diag/80).
     bad = np.flatnonzero((flags & OUTSIDE) != 0)
@@ -1178,7 +1180,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     return _finish(points, out_tets, inside, targets, cut_faces, report, stages, surface, field.size), asks
 
 
-def _mend(lattice_points, coords, tets, inside, cuts: CutEdges, targets, points, out_tets,
+def _mend(lattice_points, coords, first_centre: int, tets, inside, cuts: CutEdges, targets, points, out_tets,
           offsets) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Measure the stuffed tets (stuff's points, out_tets, offsets for these lattice tets and
     warp targets) and try other warps near those outside DIHEDRAL_BOUND or needles
@@ -1194,14 +1196,15 @@ def _mend(lattice_points, coords, tets, inside, cuts: CutEdges, targets, points,
         # points follow the new warps in place: restuff takes them as they are.
         last = retarget_warps(lattice_points, coords, tets, inside, cuts, targets, np.flatnonzero(flags != 0),
                               NEEDLE_RATIO, offsets=offsets, points=points,
-                              settled=last.searched if last is not None and last.settled else None)
+                              settled=last.searched if last is not None and last.settled else None,
+                              first_centre=first_centre)
         if not last.changed:
             break
         # Only the lattice tets around the vertices that warp elsewhere change: stuff and
         # measure those again; the others' tets and flags move in place.
         points, out_tets, again, offsets, flags = restuff(lattice_points, coords, tets, inside, cuts, targets, out_tets,
                                                           last.targets, offsets=offsets, flat_ok=True, points=points,
-                                                          flags=flags, rows=last.rows)
+                                                          flags=flags, rows=last.rows, first_centre=first_centre)
         targets = last.targets
         flags[again] = _outside_bound(points, np.take(out_tets, again, axis=0), _core(inside, targets, points.shape[0]))
     return points, out_tets, targets, offsets, flags
@@ -1388,7 +1391,7 @@ def _restrict(vertices: LeafVertices, leaves: np.ndarray) -> tuple[LeafVertices,
     order, and the mask (V,) of the old vertices kept."""
     corner_ids, coords, kept = _restricted(vertices.corner_ids, leaves, vertices.coords)
     return LeafVertices(corner_ids, np.full(corner_ids.shape[0], -1, dtype=np.int64),
-                        np.zeros((0, 18), dtype=np.int32), coords), kept
+                        np.zeros((0, 18), dtype=np.int32), coords, coords.shape[0]), kept
 
 
 @nb.njit(cache=True)

@@ -425,8 +425,17 @@ def _face_spacing(coords, a, b, e):
     return s
 
 
+@nb.njit(cache=True, inline="always")
+def _vertex_before(coords, a, b, first_centre):
+    """The order of the template quad rule: leaf corners (ids below first_centre) before face
+    centres that are no leaf's corner, each by lattice coordinates (_coords_less)."""
+    if (a >= first_centre) != (b >= first_centre):
+        return b >= first_centre
+    return _coords_less(coords, a, b)
+
+
 @nb.njit(cache=True)  # called, not inlined: see the end of the docstring
-def _quad_first_diagonal(coords, a, b, e):
+def _quad_first_diagonal(coords, a, b, e, first_centre):
     """Diagonal of the quad (a, b, cut(b, e), cut(a, e)) on face (a, b, e), a and b inside.
 
     True: the diagonal joins a to cut(b, e); False: b to cut(a, e).  It depends on the face
@@ -438,17 +447,19 @@ def _quad_first_diagonal(coords, a, b, e):
     coordinates in which a exceeds cut(b, e), take a-cut(b, e) when k is odd for an edge of
     grid corners, even for an edge of cube centres (the exact test compares 2a with b + e,
     as the rule does not depend on where the cut lies on the open edge).  On any other face
-    (transition templates), the diagonal at the smaller vertex id: number_vertices numbers
-    the face centres that are no leaf's corner after every corner, which keeps the quads of
-    a prism from cycling; an order of the coordinates alone does not (docs/design.md,
-    "Toward partitions by Morton ranges").
+    (transition templates), the diagonal at the vertex that comes first in _vertex_before:
+    leaf corners before the face centres that are no leaf's corner (ids from first_centre
+    up: number_vertices numbers those last), then by lattice coordinates.  Which points are
+    no leaf's corner keeps the quads of a prism from cycling, which an order of the
+    coordinates alone does not (docs/design.md, "Toward partitions by Morton ranges");
+    the coordinates make the choice the same however the corners are numbered.
 
     Inlined by numba at its four call sites in _stencil_tet, it made _stencils take 46 s to
     compile; called, 7 s, and _stencils runs as fast (it only runs on cut tets).
     """
     s = _face_spacing(coords, a, b, e)
     if s == 0:
-        return a < b
+        return _vertex_before(coords, a, b, first_centre)
     a0, a1, a2 = coords[a, 0] // s, coords[a, 1] // s, coords[a, 2] // s
     b0, b1, b2 = coords[b, 0] // s, coords[b, 1] // s, coords[b, 2] // s
     e0, e1, e2 = coords[e, 0] // s, coords[e, 1] // s, coords[e, 2] // s
@@ -499,7 +510,7 @@ def _sign_pattern(tets, t, signs, plus, zero, minus):
 
 
 @nb.njit(cache=True, inline="always")
-def _prism_choice(coords, plus, minus, n_p, prism):
+def _prism_choice(coords, plus, minus, n_p, prism, first_centre):
     """Quad diagonals (PRISM_TETS index) of the prism of a ++-- or +++- tet; -1 when the three
     quads' rules cycle, which they never do on lattice tets of any spacing and transition
     templates (tests/test_stuffing.py tries every tet and outside vertex of random octrees).
@@ -512,15 +523,15 @@ def _prism_choice(coords, plus, minus, n_p, prism):
     if n_p == 2:
         a = plus[0]
         b = plus[1]
-        if not _quad_first_diagonal(coords, a, b, minus[0]):
+        if not _quad_first_diagonal(coords, a, b, minus[0], first_centre):
             choice |= 1
-        if _quad_first_diagonal(coords, a, b, minus[1]):
+        if _quad_first_diagonal(coords, a, b, minus[1], first_centre):
             choice |= 4
         if prism[choice, 0, 0] < 0:
             choice |= 2
         return choice
     for i in range(3):
-        if not _quad_first_diagonal(coords, plus[i], plus[(i + 1) % 3], minus[0]):
+        if not _quad_first_diagonal(coords, plus[i], plus[(i + 1) % 3], minus[0], first_centre):
             choice |= 1 << i
     return choice if prism[choice, 0, 0] >= 0 else -1
 
@@ -561,7 +572,7 @@ def _stencil_offsets(tets, signs):
 
 
 @nb.njit(cache=True, inline="always")
-def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch):
+def _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, out, k, scratch):
     """Write the stencil tets of lattice tet t from out[k] on; returns 1 if the lattice tet was
     cut or warped, 0 if it is copied untouched, -1 if the quad rule gave a prism cyclic
     diagonals (which it must never do; the caller raises, as a parallel loop cannot)."""
@@ -590,7 +601,7 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
         e = minus[0]
         cae = _cut_id(table, n_lattice, a, e)
         cbe = _cut_id(table, n_lattice, b, e)
-        if _quad_first_diagonal(coords, a, b, e):
+        if _quad_first_diagonal(coords, a, b, e, first_centre):
             _emit(out, k, z, a, b, cbe)
             _emit(out, k + 1, z, a, cbe, cae)
         else:
@@ -607,7 +618,7 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
         for i in range(3):
             pv[i] = plus[i]
             pv[3 + i] = _cut_id(table, n_lattice, plus[i], minus[0])
-    choice = _prism_choice(coords, plus, minus, n_p, prism)
+    choice = _prism_choice(coords, plus, minus, n_p, prism, first_centre)
     if choice < 0:
         return -1
     for i in range(3):
@@ -616,7 +627,7 @@ def _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratc
 
 
 @nb.njit(cache=True)
-def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touched):
+def _stencils(tets, signs, coords, first_centre, table, n_lattice, prism, offsets, out, touched):
     """Stencil tets of lattice tet t into out[offsets[t]:offsets[t + 1]]; touched[k] is False
     for output tets that are untouched lattice tets.  Returns the number of lattice tets whose
     prism came out with cyclic diagonals (must be 0).
@@ -634,7 +645,7 @@ def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touche
                 out[k, i] = tets[t, i]
             touched[k] = False
             continue
-        cut = _stencil_tet(t, tets, signs, coords, table, n_lattice, prism, out, k, scratch)
+        cut = _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, out, k, scratch)
         if cut < 0:
             cyclic += 1
         for i in range(k, offsets[t + 1]):
@@ -643,7 +654,7 @@ def _stencils(tets, signs, coords, table, n_lattice, prism, offsets, out, touche
 
 
 @nb.njit(cache=True, parallel=True)
-def _stencils_in_chunks(tets, signs, coords, table, n_lattice, prism, offsets, out, touched):
+def _stencils_in_chunks(tets, signs, coords, first_centre, table, n_lattice, prism, offsets, out, touched):
     """_stencils over chunks of the lattice tets in parallel: each chunk writes only its own
     tets' rows of out (offsets are absolute), so the result is the same.  The serial kernel is
     called, not inlined, so the parallel loop compiles in seconds."""
@@ -653,7 +664,8 @@ def _stencils_in_chunks(tets, signs, coords, table, n_lattice, prism, offsets, o
     for c in nb.prange(n_chunks):
         a = c * n // n_chunks
         b = (c + 1) * n // n_chunks
-        cyclic[c] = _stencils(tets[a:b], signs, coords, table, n_lattice, prism, offsets[a:b + 1], out, touched)
+        cyclic[c] = _stencils(tets[a:b], signs, coords, first_centre, table, n_lattice, prism, offsets[a:b + 1], out,
+                              touched)
     return cyclic.sum()
 
 
@@ -741,7 +753,8 @@ def _signs(inside, targets):
 
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
-          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False,
+          first_centre: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points
     kept, and offsets (T + 1,) int64: lattice tet t's tets are tets[offsets[t]:offsets[t + 1]].
 
@@ -752,22 +765,29 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     is oriented as its piece of the lattice tet is before the warps, so one the warps fold
     has negative volume.  A flat or folded tet is a bug on a one-level band (AssertionError);
     flat_ok keeps it, for a band that changes level, whose caller measures every tet and
-    mends or refines where one is bad (retarget_warps).
+    mends or refines where one is bad (retarget_warps).  first_centre: the vertices from
+    this id up are face centres that are no leaf's corner (LeafVertices.first_centre; None:
+    there are none), which the quad rule on template faces puts last (_quad_first_diagonal).
     """
     points, signs = _warped(lattice_points, inside, cuts, targets)
-    out, offsets = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok)
+    out, offsets = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok,
+                                _first_centre(first_centre, lattice_points))
     return points, out, offsets
 
 
+def _first_centre(first_centre: int | None, lattice_points: np.ndarray) -> int:
+    return lattice_points.shape[0] if first_centre is None else int(first_centre)
+
+
 def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
-                 flat_ok: bool) -> tuple[np.ndarray, np.ndarray]:
+                 flat_ok: bool, first_centre: int) -> tuple[np.ndarray, np.ndarray]:
     """The stencil tets (M, 4) int32 of the lattice tets (T, 4), in order, oriented (stuff),
     and offsets (T + 1,): lattice tet t's are out[offsets[t]:offsets[t + 1]]."""
     offsets = _stencil_offsets(tets, signs)
     out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
     touched = np.empty(out.shape[0], dtype=np.bool_)
-    if _stencils_in_chunks(tets, signs, coords, cuts.table, lattice_points.shape[0], PRISM_TETS, offsets, out,
-                           touched):
+    if _stencils_in_chunks(tets, signs, coords, first_centre, cuts.table, lattice_points.shape[0], PRISM_TETS,
+                           offsets, out, touched):
         raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
     folded = _orient(points, lattice_points, out, touched)
     if folded and not flat_ok:
@@ -778,7 +798,8 @@ def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
 def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray, cuts: CutEdges,
             targets: np.ndarray, out: np.ndarray, new_targets: np.ndarray, *, offsets: np.ndarray,
             flat_ok: bool = False, points: np.ndarray | None = None, flags: np.ndarray | None = None,
-            rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            rows: np.ndarray | None = None,
+            first_centre: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """stuff(..., new_targets), given out, offsets = stuff(..., targets)[1:]: only the lattice
     tets with a vertex whose warp changed are stuffed again; the others' tets move up or down
     in out, in place, and so do their flags (M,) uint8 (any per-tet bytes of the caller's;
@@ -789,6 +810,7 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     points for new_targets if the caller has them (retarget_warps updates stuff's in place),
     else computed.  rows: the lattice tets with a vertex whose warp changed, ascending, if the
     caller has them (Retargeted.rows), else found by a scan of every lattice tet.
+    first_centre: as for stuff.
 
     Returns (points, tets (M', 4) int32, again, offsets, flags (M',)): the same points, tets
     and offsets as stuff with new_targets; again: the indices (ascending) of the tets stuffed
@@ -807,7 +829,7 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     if rows is None:
         rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
-                                        flat_ok)
+                                        flat_ok, _first_centre(first_centre, lattice_points))
     shift = _row_shifts(offsets, rows, again_offsets)
     total = int(offsets[-1] + shift[-1])
     if total > out.shape[0]:
@@ -891,7 +913,7 @@ def _place_again(out, flags, starts, again, again_offsets):
 
 
 @nb.njit(cache=True)
-def _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi):
+def _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi):
     """(worst violation of [lo, hi] in degrees, smallest 3r/R) over the stencil tets
     of the lattice tets star, stuffed with these signs and points (lattice vertices where the
     warps put them, then the cut points); a tet folded or flattened by the warps (see
@@ -906,7 +928,7 @@ def _star_score(star, tets, signs, points, lattice_points, coords, table, prism,
         offsets[t + 1] = offsets[t] + _stencil_size(n_p, n_z, n_m)
     out = np.empty((offsets[-1], 4), dtype=np.int32)
     touched = np.empty(out.shape[0], dtype=np.bool_)
-    if _stencils(local, signs, coords, table, lattice_points.shape[0], prism, offsets, out, touched):
+    if _stencils(local, signs, coords, first_centre, table, lattice_points.shape[0], prism, offsets, out, touched):
         return 180.0, 0.0
     worst = 0.0
     thinnest = 1.0
@@ -944,7 +966,7 @@ def _set_warp(v, e, signs, targets, points, lattice_points, inside):
 
 @nb.njit(cache=True)
 def _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points,
-              inside, coords, table, prism, lo, hi, min_ratio, sweeps):
+              inside, coords, first_centre, table, prism, lo, hi, min_ratio, sweeps):
     """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi] or
     with 3r/R below min_ratio, the warp (none, or onto the cut point of one of its cut edges)
     that brings the star's worst violation lowest, ties to the largest smallest 3r/R (needles:
@@ -967,7 +989,7 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
             star = stars[star_first[i]:star_first[i + 1]]
             if visited_at[i] >= 0 and not _star_moved_since(star, tets, vertices, moved_at, visited_at[i]):
                 continue
-            worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+            worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
             visited_at[i] = moves
             if worst <= 0 and thinnest >= min_ratio:
                 continue
@@ -978,7 +1000,7 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
                 if e == current:
                     continue
                 _set_warp(v, e, signs, targets, points, lattice_points, inside)
-                w, r = _star_score(star, tets, signs, points, lattice_points, coords, table, prism, lo, hi)
+                w, r = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
                 if w < best or (w == best and r > best_thinnest):
                     best, best_thinnest, best_target = w, r, e
             _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
@@ -1112,7 +1134,7 @@ def _bad_tet_vertices(tets: np.ndarray, offsets: np.ndarray, bad: np.ndarray) ->
 def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
                    cuts: CutEdges, targets: np.ndarray, bad: np.ndarray, min_ratio: float = 0.0, *,
                    offsets: np.ndarray, points: np.ndarray | None = None,
-                   settled: np.ndarray | None = None) -> Retargeted:
+                   settled: np.ndarray | None = None, first_centre: int | None = None) -> Retargeted:
     """Mend stuffed tets outside DIHEDRAL_BOUND (and needles: 3r/R below min_ratio) by choosing
     other warps near them.
 
@@ -1129,7 +1151,7 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     copy of (V + E, 3); else they are computed.  settled: the vertices (ascending) of the
     caller's last search if it settled and no warp changed since (Retargeted.searched): when
     every vertex to search is among them, the search is known to move none and is skipped
-    (the result's targets are then targets itself).
+    (the result's targets are then targets itself).  first_centre: as for stuff.
     Returns a Retargeted (the new warp targets, the lattice tets to stuff again for them:
     restuff's rows); the caller stuffs again and measures: this is a search, it certifies
     nothing.
@@ -1150,8 +1172,8 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     # A vertex's options: the cut edges it starts, then those it ends, each in order.
     option_first, options = _star_options(vertices, star_first, stars, tets, cuts.starts, *cuts.table)
     settled = _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points,
-                        inside, coords, cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio),
-                        RETARGET_SWEEPS)
+                        inside, coords, _first_centre(first_centre, lattice_points), cuts.table, PRISM_TETS,
+                        DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio), RETARGET_SWEEPS)
     # Only the searched vertices move; the lattice tets to stuff again are their stars.
     moved = np.take(new, vertices) != np.take(targets, vertices)
     in_moved_star = np.repeat(moved, np.diff(star_first))
