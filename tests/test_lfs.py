@@ -17,6 +17,7 @@ from paroct.errors import ParoctError
 from paroct.features import face_normals
 from paroct.frame import fat_frame
 from paroct.lfs import bent_cells, cells_met, curvature_asks, triangle_pieces
+from paroct.mesher import BYTES_PER_TET
 from paroct.stuffing import DIHEDRAL_BOUND
 from paroct.surface import load_surface
 
@@ -253,7 +254,7 @@ def test_asks_that_do_not_fit_warn_and_mesh_without_them():
     """A memory budget the refined band does not fit: the plain mesh, and a warning saying the
     curvature was not honoured and why (not a silent coarser mesh)."""
     plain = paroct.mesh(_plate_with_hole(), size=1.0)
-    budget = 2 * plain.report.n_tets * 250  # room for the plain passes, not for size / 8 on the hole
+    budget = 2 * plain.report.n_tets * BYTES_PER_TET  # room for the plain passes, not for size / 8 on the hole
     result = paroct.mesh(_plate_with_hole(), size=1.0, curvature=48, max_memory=budget)
     assert result.report.n_tets == plain.report.n_tets
     assert any("not honoured" in w and "memory" in w for w in result.report.warnings)

@@ -386,7 +386,7 @@ def test_size_checks():
             mesh(box, size=bad)
     with pytest.raises(ParoctError, match="GiB"):
         mesh(box, size=1e-4)  # ~1.2e13 tets: refused before any work
-    with pytest.raises(ParoctError, match=r"27.7 MiB, more than the 1000 bytes allowed"):
+    with pytest.raises(ParoctError, match=r"about 1.16e\+05 lattice tets and [\d.]+ MiB, more than the 1000 bytes allowed"):
         mesh(box, size=0.05, max_memory=1000)
 
 

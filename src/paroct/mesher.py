@@ -43,8 +43,12 @@ from .topology import SurfaceTopology, used_vertices
 FAT_RADIUS_RATIO = 3 / np.sqrt(10)
 #: Default element size as a fraction of the bounding-box diagonal.
 DEFAULT_DIVISIONS = 40
-#: Peak bytes per tet of a mesh() call: 205 (session 2) and 196 (session 3) measured on fea_part at diag/80 (25 M tets, graded, refined), plus headroom.
-BYTES_PER_TET = 250
+#: Peak bytes of a pass per tet that estimate_tets (or, near thin places, _local_tets) counts
+#: for it: the memory guard.  Session 43 measured 54-87 on the corpus' one-level passes of
+#: 0.4-4 M estimated tets, graded (diag/160) and uniform (diag/120), and 54 on fea_part at
+#: diag/1000 (97 M estimated, 61 M made, writing the .msh included), where sessions 2-3 had
+#: measured 196-205 and set 250; smaller meshes read more (to 130) but their totals are small.
+BYTES_PER_TET = 150
 #: Thickness of the finest band in units of size, for the memory estimate (cells met by the
 #: surface plus a ring on each side, times the Freudenthal cell's extent).
 BAND_CELLS = 4
