@@ -287,13 +287,7 @@ class _Reader:
         (partition interfaces: pieces of an entity of another dimension)."""
         section = "PartitionedEntities" if partitioned else "Entities"
         out = ({}, {}, {}, {})
-        if binary:
-            types = {"int": np.dtype("<i4"), "size_t": size_t, "double": np.dtype("<f8")}
-
-            def read(kind: str, count: int) -> np.ndarray:
-                return self._binary(types[kind], count, f"${section}")
-        else:
-            read = _Numbers(self._ascii_numbers(section), f"${section}")
+        read = self._numbers(section, binary, size_t)
         if partitioned:
             read("size_t", 1)  # partitions
             read("int", 2 * int(read("size_t", 1)[0]))  # ghost entities: (tag, partition) pairs
@@ -310,35 +304,35 @@ class _Reader:
                 out[dim][tag] = ([int(t) for t in read("int", n_physical)], parent)
                 if dim > 0:
                     read("int", int(read("size_t", 1)[0]))
-        if not binary:
-            read.done()
+        read.done()
         self._end(section)
         return out
 
+    def _numbers(self, section: str, binary: bool, size_t: np.dtype):
+        """A reader of a 4.1 section's numbers in order, read(kind, count) with kind 'int',
+        'size_t' or 'double', and done() at its end: binary values at the cursor, or the
+        section's text (_Numbers)."""
+        if not binary:
+            return _Numbers(self._ascii_numbers(section), f"${section}")
+        return _BinaryNumbers(self, {"int": np.dtype("<i4"), "size_t": size_t, "double": np.dtype("<f8")},
+                              f"${section}")
+
     def nodes4(self, binary: bool, size_t: np.dtype) -> tuple[np.ndarray, np.ndarray]:
         """(tags (N,) int64, points (N, 3) float64) of a 4.1 $Nodes section."""
-        read = _Numbers(self._ascii_numbers("Nodes"), "$Nodes") if not binary else None
-        header = self._binary(size_t, 4, "$Nodes") if binary else read("size_t", 4)
+        read = self._numbers("Nodes", binary, size_t)
+        header = read("size_t", 4)
         n_blocks, n_nodes = int(header[0]), int(header[1])
         tags, points = [], []
         for _ in range(n_blocks):
-            if binary:
-                dim, _, parametric = (int(v) for v in self._binary(np.dtype("<i4"), 3, "$Nodes"))
-                _check_node_block(dim, parametric)
-                count = int(self._binary(size_t, 1, "$Nodes")[0])
-                block_tags = self._binary(size_t, count, "$Nodes")
-                per_node = 3 + (int(dim) if parametric else 0)
-                xyz = self._binary(np.dtype("<f8"), count * per_node, "$Nodes")
-            else:
-                dim, _, parametric, count = (int(v) for v in read("int", 4))
-                _check_node_block(dim, parametric)
-                block_tags = read("size_t", count)
-                per_node = 3 + (dim if parametric else 0)
-                xyz = read("double", count * per_node)
+            dim, _, parametric = (int(v) for v in read("int", 3))
+            if parametric not in (0, 1) or not 0 <= dim <= 3:
+                raise MshError(f"a $Nodes block has entity dimension {dim} and parametric flag {parametric}")
+            count = int(read("size_t", 1)[0])
+            block_tags = read("size_t", count)
+            per_node = 3 + (dim if parametric else 0)  # x y z, then u (curves), u v (surfaces), u v w
             tags.append(_tags(block_tags, "$Nodes"))
-            points.append(xyz.reshape(count, per_node)[:, :3])
-        if not binary:
-            read.done()
+            points.append(read("double", count * per_node).reshape(count, per_node)[:, :3])
+        read.done()
         self._end("Nodes")
         tags = np.concatenate(tags) if tags else np.zeros(0, dtype=np.int64)
         if tags.size != n_nodes:
@@ -353,24 +347,20 @@ class _Reader:
         dimension; empty where the file has no $Entities).  A partitioned file's elements
         take their parent entity's tag, and those on partition interfaces are left out."""
         listed = any(entities)
-        read = _Numbers(self._ascii_numbers("Elements"), "$Elements") if not binary else None
-        header = self._binary(size_t, 4, "$Elements") if binary else read("size_t", 4)
+        read = self._numbers("Elements", binary, size_t)
+        header = read("size_t", 4)
         n_blocks, n_elements = int(header[0]), int(header[1])
         blocks = {}
         total = 0
         for _ in range(n_blocks):
-            if binary:
-                dim, entity, kind = (int(v) for v in self._binary(np.dtype("<i4"), 3, "$Elements"))
-                count = int(self._binary(size_t, 1, "$Elements")[0])
-            else:
-                dim, entity, kind, count = (int(v) for v in read("int", 4))
+            dim, entity, kind = (int(v) for v in read("int", 3))
+            count = int(read("size_t", 1)[0])
             if kind not in NODES_PER_TYPE:
                 raise MshError(f"$Elements holds elements of Gmsh type {kind}, which paroct does not know")
             if dim != TYPE_DIMENSION[kind]:
                 raise MshError(f"an $Elements block puts {type_name(kind)} elements on an entity of dimension {dim}")
             width = 1 + NODES_PER_TYPE[kind]
-            rows = (self._binary(size_t, count * width, "$Elements") if binary
-                    else read("size_t", count * width)).reshape(count, width)
+            rows = read("size_t", count * width).reshape(count, width)
             total += count
             physicals, parent = [], (dim, entity)
             if listed:
@@ -382,8 +372,7 @@ class _Reader:
                     continue
             blocks.setdefault(kind, []).append((_tags(rows[:, 1:], "$Elements"), np.full(count, parent[1], dtype=np.int64),
                                                 np.full(count, physicals[0] if physicals else 0, dtype=np.int64)))
-        if not binary:
-            read.done()
+        read.done()
         self._end("Elements")
         if total != n_elements:
             raise MshError(f"$Elements says it holds {n_elements} elements, its blocks hold {total}")
@@ -493,9 +482,17 @@ class _Reader:
         return int(line)
 
 
-def _check_node_block(dim: int, parametric: int) -> None:
-    if parametric not in (0, 1) or not 0 <= dim <= 3:
-        raise MshError(f"a $Nodes block has entity dimension {dim} and parametric flag {parametric}")
+class _BinaryNumbers:
+    """_Reader._numbers of a binary file: values of the kind's type at the reader's cursor."""
+
+    def __init__(self, reader: _Reader, types: dict, section: str):
+        self.reader, self.types, self.section = reader, types, section
+
+    def __call__(self, kind: str, count: int) -> np.ndarray:
+        return self.reader._binary(self.types[kind], count, self.section)
+
+    def done(self) -> None:
+        pass
 
 
 class _Numbers:
