@@ -68,8 +68,12 @@ class MshFile(NamedTuple):
 
 def is_msh(data: bytes) -> bool:
     """Whether data starts (after white space) as a Gmsh MSH 2 or 4 file does."""
-    start = len(_BOM) if data.startswith(_BOM) else 0
-    return data.startswith(b"$MeshFormat", _SPACE.match(data, start).end())
+    return data.startswith(b"$MeshFormat", _SPACE.match(data, _text_start(data)).end())
+
+
+def _text_start(data: bytes) -> int:
+    """Where a file's text starts: after a UTF-8 byte-order mark, if it has one."""
+    return len(_BOM) if data.startswith(_BOM) else 0
 
 
 def type_name(kind: int) -> str:
@@ -151,7 +155,7 @@ class _Reader:
     """A cursor over the file's bytes, section by section."""
 
     def __init__(self, data: bytes):
-        self.data, self.pos = data, len(_BOM) if data.startswith(_BOM) else 0
+        self.data, self.pos = data, _text_start(data)
 
     def _skip_space(self) -> bool:
         """Move the cursor past white space; whether anything follows."""
@@ -370,8 +374,10 @@ class _Reader:
                 physicals, parent = entities[dim][entity]
                 if parent[0] != dim:  # a partition interface, no part of the model
                     continue
-            blocks.setdefault(kind, []).append((_tags(rows[:, 1:], "$Elements"), np.full(count, parent[1], dtype=np.int64),
-                                                np.full(count, physicals[0] if physicals else 0, dtype=np.int64)))
+            group = physicals[0] if physicals else 0
+            blocks.setdefault(kind, []).append((_tags(rows[:, 1:], "$Elements"),
+                                                np.full(count, parent[1], dtype=np.int64),
+                                                np.full(count, group, dtype=np.int64)))
         read.done()
         self._end("Elements")
         if total != n_elements:

@@ -989,7 +989,8 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
             star = stars[star_first[i]:star_first[i + 1]]
             if visited_at[i] >= 0 and not _star_moved_since(star, tets, vertices, moved_at, visited_at[i]):
                 continue
-            worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
+            worst, thinnest = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table,
+                                          prism, lo, hi)
             visited_at[i] = moves
             if worst <= 0 and thinnest >= min_ratio:
                 continue
@@ -1000,7 +1001,8 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
                 if e == current:
                     continue
                 _set_warp(v, e, signs, targets, points, lattice_points, inside)
-                w, r = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
+                w, r = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism,
+                                   lo, hi)
                 if w < best or (w == best and r > best_thinnest):
                     best, best_thinnest, best_target = w, r, e
             _set_warp(v, best_target, signs, targets, points, lattice_points, inside)
