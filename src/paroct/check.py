@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -405,12 +406,12 @@ class CheckReport:
         if err is not None and not abs(err) <= VOLUME_ERROR_LIMIT:
             out.append(f"the mesh's volume differs from the solid's by {100 * err:+.3g}% (more than "
                        f"{100 * VOLUME_ERROR_LIMIT:g}%): not a mesh of this solid?")
-        if self.hausdorff is not None and not self.hausdorff <= HAUSDORFF_LIMIT:
+        if self.hausdorff is not None and self.hausdorff_at is not None and not self.hausdorff <= HAUSDORFF_LIMIT:
             x, y, z = self.hausdorff_at
             out.append(f"the mesh's boundary and the surface are {self.hausdorff:.3g} x the diagonal apart at "
                        f"({x:.6g}, {y:.6g}, {z:.6g}) (more than {HAUSDORFF_LIMIT:g}): not a mesh of this surface, or "
                        "part of it missing?")
-        if self.surface_crossings:
+        if self.surface_crossings and self.crossing_at is not None:
             x, y, z = self.crossing_at
             out.append(f"the surface intersects itself: {self.surface_crossings} of its triangles cross others, one "
                        f"centred at ({x:.6g}, {y:.6g}, {z:.6g}); no mesh fills it as a solid")
@@ -428,10 +429,11 @@ class CheckReport:
             + ("closed manifold" if self.boundary_manifold else
                f"NOT manifold ({self.boundary_bad_edges} bad edges, {self.boundary_bad_vertices} bad vertices)"),
         ]
-        if self.solid_volume is not None:
-            lines.append(f"solid volume {self.solid_volume:.6g}, mesh volume error {100 * self.volume_error:+.3f}%")
+        err, at = self.volume_error, self.hausdorff_at
+        if err is not None and at is not None:  # both set with a surface
+            lines.append(f"solid volume {self.solid_volume:.6g}, mesh volume error {100 * err:+.3f}%")
             lines.append(f"surface {self.surface_components} components, genus {self.surface_genus}")
-            x, y, z = self.hausdorff_at
+            x, y, z = at
             lines.append(f"Hausdorff distance {self.hausdorff:.4g} x diagonal (mesh->surface {self.hausdorff_to_surface:.4g}, "
                          f"surface->mesh {self.hausdorff_to_mesh:.4g}), largest at ({x:.6g}, {y:.6g}, {z:.6g})")
         problems = self.problems()
@@ -492,7 +494,7 @@ def check_mesh(
     topo = surface_topology(faces, n)
     referenced = np.unique(tets).shape[0] if m else 0
     empty = m == 0
-    fields = dict(
+    fields: dict[str, Any] = dict(
         n_tets=int(m),
         n_vertices=int(n),
         n_unreferenced=int(n - referenced),
@@ -558,6 +560,8 @@ def mesh_metrics(points: np.ndarray, tets: np.ndarray, surface: Surface) -> dict
         tets = tets[:, [0, 2, 1, 3]]
         q = tet_quality(points, tets)
     report = check_mesh(points, tets, surface)
+    volume_error, hausdorff = report.volume_error, report.hausdorff
+    assert volume_error is not None and hausdorff is not None  # check_mesh with a surface sets both
     good = q.volume > 0
     return {
         "tets": int(tets.shape[0]),
@@ -569,8 +573,8 @@ def mesh_metrics(points: np.ndarray, tets: np.ndarray, surface: Surface) -> dict
         "mean_radius_ratio": float(q.radius_ratio[good].mean()) if good.any() else float("nan"),
         "frac_radius_ratio_below_0.3": float((q.radius_ratio < 0.3).mean()) if tets.size else float("nan"),
         "inverted": int((~good).sum()),
-        "volume_error": float(report.volume_error),
-        "hausdorff": float(report.hausdorff),
+        "volume_error": float(volume_error),
+        "hausdorff": float(hausdorff),
         "closed": bool(report.boundary_manifold and report.overloaded_faces == 0 and report.same_side_faces == 0),
         "topology_kept": bool((report.boundary_components, report.boundary_genus)
                               == (report.surface_components, report.surface_genus)),

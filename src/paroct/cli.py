@@ -277,7 +277,7 @@ def _threads(n: int | None):
     if n is None:
         yield
         return
-    most = numba.config.NUMBA_NUM_THREADS
+    most = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
     if not 1 <= n <= most:
         raise ParoctError(f"--threads {n}: must be from 1 to {most}, the CPUs numba starts threads for "
                           "(the environment variable NUMBA_NUM_THREADS sets that)")
@@ -303,7 +303,7 @@ def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_siz
         _err("compiling the numba kernels on this first run (about a minute on 2 cores; cached afterwards)")
     memory_start = start_peak_count() if args.verbose else None
     t0 = time.perf_counter()
-    regions = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
+    regions: list[Box | Sphere] = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
     regions += [Sphere(center=tuple(b[:3]), radius=b[3], size=b[4]) for b in args.refine_sphere]
     with _terminal_status(not (args.quiet or args.verbose)) as status:
         surface = load_surface(source)
@@ -327,13 +327,14 @@ def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_siz
         write_mesh(out, result.mesh.points, result.mesh.tets, boundary=boundary)
         t2 = time.perf_counter()
     peak = peak_resident() if memory_start is not None else None
+    used = None if peak is None or memory_start is None else max(peak - memory_start, 0)
     report = result.report
     for warning in report.warnings:
         _err(f"warning: {_one_line(warning)}")
     if not args.quiet:
         print(format_mesh_summary(report, out, mesh_seconds=t1 - t0, write_seconds=t2 - t1, verbose=args.verbose,
                                   load_seconds=t_loaded - t0,
-                                  peak_bytes=None if peak is None else max(peak - memory_start, 0), boundary=boundary))
+                                  peak_bytes=used, boundary=boundary))
     return EXIT_OK
 
 

@@ -123,8 +123,8 @@ def thin_features(frame: FatFrame, crossings: dict, vertices: np.ndarray, faces:
     two crossed triangles must have unit normals with dot product below ``facing``."""
     normals = face_normals(vertices, faces)
     parts = []
+    rc: RowCrossings
     for d, rc in sorted(crossings.items()):
-        rc: RowCrossings
         vec = EDGE_DIRECTIONS[d] @ LATTICE_TO_SPACE.T
         step = float(np.linalg.norm(vec)) * frame.h
         first, thick, wall, dots = _facing_pairs(rc.keys, rc.fracs, rc.signs, rc.faces, normals, vec / np.linalg.norm(vec),

@@ -244,7 +244,7 @@ def _write_vtu(path: Path, points: np.ndarray, tets: np.ndarray, triangles: np.n
     connectivity = tets.astype(index_type, copy=False).reshape(-1)
     offsets = np.arange(4, 4 * n_tets + 1, 4, dtype=index_type)
     types = np.full(n_cells, _VTK_TETRA, dtype="u1")
-    if n_triangles:
+    if triangles is not None and n_triangles:
         connectivity = np.concatenate([connectivity, triangles.astype(index_type, copy=False).reshape(-1)])
         offsets = np.concatenate([offsets, np.arange(4 * n_tets + 3, n_ids + 1, 3, dtype=index_type)])
         types[n_tets:] = _VTK_TRIANGLE
@@ -255,7 +255,7 @@ def _write_vtu(path: Path, points: np.ndarray, tets: np.ndarray, triangles: np.n
                       for name, values in cell_data.items()]),
     ]
     # Every array's VTK type before the file is opened: an array it cannot hold leaves no file.
-    types = {(section, name): _vtu_type(values.dtype) for section, arrays in sections for name, values in arrays}
+    vtk_types = {(section, name): _vtu_type(values.dtype) for section, arrays in sections for name, values in arrays}
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     with open(path, "wb") as out, ThreadPoolExecutor(min(8, cores)) as pool:
         out.write(b'<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" '
@@ -267,7 +267,7 @@ def _write_vtu(path: Path, points: np.ndarray, tets: np.ndarray, triangles: np.n
             out.write(f"<{section}>\n".encode())
             for name, values in arrays:
                 components = f'NumberOfComponents="{values.shape[1]}" ' if values.ndim == 2 else ""
-                out.write(f'<DataArray type="{types[section, name]}" Name="{name}" {components}format="binary">\n'.encode())
+                out.write(f'<DataArray type="{vtk_types[section, name]}" Name="{name}" {components}format="binary">\n'.encode())
                 out.write(_vtu_zlib_base64(values, pool))
                 out.write(b"\n</DataArray>\n")
             out.write(f"</{section}>\n".encode())
@@ -284,7 +284,7 @@ def _vtu_type(dtype: np.dtype) -> str:
 def _vtu_zlib_base64(values: np.ndarray, pool: ThreadPoolExecutor) -> bytes:
     """One .vtu binary array: base64 of the UInt64 header (blocks, block size, last block
     size, compressed sizes), then base64 of the compressed blocks (VTK encodes them apart)."""
-    raw = memoryview(np.ascontiguousarray(values).reshape(-1).view(np.uint8))
+    raw = np.ascontiguousarray(values).reshape(-1).view(np.uint8).data
     starts = range(0, len(raw), VTU_BLOCK_BYTES)
     blocks = list(pool.map(lambda i: zlib.compress(raw[i:i + VTU_BLOCK_BYTES], VTU_ZLIB_LEVEL), starts))
     last = len(raw) - VTU_BLOCK_BYTES * (len(blocks) - 1) if blocks else 0
@@ -440,8 +440,8 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
         out.write(ints([1]) + box(points) + ints([1], size_t) + ints([1]) + ints([n_patches], size_t)
                   + ints(np.arange(1, n_patches + 1)) + b"\n$EndEntities\n")
         out.write(b"$Nodes\n" + ints([1, len(points), 1, len(points)], size_t) + ints([3, 1, 0]) + ints([len(points)], size_t))
-        out.write(np.arange(1, len(points) + 1, dtype=size_t))  # arrays are written through their buffers, uncopied
-        out.write(np.ascontiguousarray(points, dtype="<f8"))
+        out.write(np.arange(1, len(points) + 1, dtype=size_t).data)  # arrays are written through their buffers, uncopied
+        out.write(np.ascontiguousarray(points, dtype="<f8").data)
         out.write(b"\n$EndNodes\n")
         blocks = [(3, 1, _GMSH_TETRA, tets)] + [(2, p, _GMSH_TRIANGLE, f) for p, f in enumerate(patch_faces, start=1)
                                                 if len(f)]  # an empty block is legal, but meshio cannot read it
@@ -453,7 +453,7 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
             table[:, 0] = np.arange(tag, tag + len(rows))
             table[:, 1:] = rows + 1
             out.write(ints([dim, entity, kind]) + ints([len(rows)], size_t))
-            out.write(table)
+            out.write(table.data)
             tag += len(rows)
         out.write(b"\n$EndElements\n")
         for name, values in (cell_data or {}).items():
@@ -462,7 +462,7 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
             rows["tag"] = np.arange(1, n_elements + 1)
             rows["values"][:len(tets)] = columns
             out.write(f'$ElementData\n1\n"{name}"\n1\n0.0\n3\n0\n{columns.shape[1]}\n{n_elements}\n'.encode())
-            out.write(rows)
+            out.write(rows.data)
             out.write(b"\n$EndElementData\n")
 
 
@@ -492,10 +492,10 @@ def _write_points(out, points: np.ndarray, line: str, with_ids: bool) -> None:
 def _write_int_rows(out, tets: np.ndarray, sep: bytes, with_ids: bool, reference: int = -1) -> None:
     """tets (M, 4) as text lines of 1-based ids joined by sep, after the element id (from 1)
     if with_ids, before reference if it is not negative."""
-    sep = np.frombuffer(sep, dtype=np.uint8)
+    sep_bytes = np.frombuffer(sep, dtype=np.uint8)
     for lo in range(0, len(tets), _TEXT_CHUNK_ROWS):
         chunk = np.ascontiguousarray(tets[lo:lo + _TEXT_CHUNK_ROWS], dtype=np.int64)
-        out.write(_int_lines(chunk, lo + 1 if with_ids else -1, reference, sep).tobytes())
+        out.write(_int_lines(chunk, lo + 1 if with_ids else -1, reference, sep_bytes).tobytes())
 
 
 @nb.njit(cache=True)
@@ -585,7 +585,7 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     regular_file(path, "a mesh file")
     ext = path.suffix.lower()
-    formats = [None]  # meshio's choice by extension
+    formats: list[str | None] = [None]  # meshio's choice by extension
     if ext in _FORMAT_OVERRIDES:  # ours first, then any other format of the extension (.msh: Gmsh, ANSYS)
         ours = _FORMAT_OVERRIDES[ext][0]
         formats = [ours] + [f for f in meshio.extension_to_filetypes.get(ext, []) if f != ours]
@@ -607,7 +607,7 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             text = printed.getvalue() if isinstance(exc, SystemExit) else str(exc)
             lines = [line.strip() for line in text.splitlines() if line.strip()]
             if isinstance(exc, KeyError) and exc.args:  # a cell naming a node the file lacks
-                lines = [f"a cell refers to node {int(exc.args[0]) if np.isscalar(exc.args[0]) else exc.args[0]}, "
+                lines = [f"a cell refers to node {exc.args[0]}, "
                          "which the file does not define"]
             elif "need at least one array to concatenate" in text:  # meshio's .vtu reader on no cells
                 lines = ["it holds no cells"]
@@ -617,7 +617,7 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if ext == ".msh":
             raise ParoctError(f"cannot read {path}: not a Gmsh MSH file (it does not start with $MeshFormat), "
                               f"nor an ANSYS one" + (f" (meshio: {said})" if said else ""))
-        tried = f" (read as {' and as '.join(formats)})" if len(formats) > 1 else ""
+        tried = f" (read as {' and as '.join(str(f) for f in formats)})" if len(formats) > 1 else ""
         raise ParoctError(f"cannot read {path}{tried}: {first_error}")
     blocks = [np.asarray(b.data, dtype=np.int64).reshape(-1, 4) for b in raw.cells if b.type == "tetra"]
     if not sum(len(b) for b in blocks):

@@ -152,10 +152,11 @@ class MeshResult:
         boundary_patches(feature_angle) tags: the input's named groups, or the surface split
         at feature_angle degrees (default 40).  The report's angles, 3r/R and volume are
         measured again, and a note says how many vertices moved."""
-        labelled = surface_labels(self._surface(), feature_angle)
+        surface = self._surface()
+        labelled = surface_labels(surface, feature_angle)
         tets = np.ascontiguousarray(self.mesh.tets, dtype=np.int64)  # once, for the tagging and the stars
-        patches = tag_boundary(self.mesh.points, tets, self.surface, *labelled, self.boundary_faces, self.point_faces)
-        snapped = snap_to_features(self.mesh.points, tets, patches, self.surface, labelled[0], self.report.size)
+        patches = tag_boundary(self.mesh.points, tets, surface, *labelled, self.boundary_faces, self.point_faces)
+        snapped = snap_to_features(self.mesh.points, tets, patches, surface, labelled[0], self.report.size)
         del tets
         report = dataclasses.replace(self.report, warnings=list(self.report.warnings), notes=list(self.report.notes),
                                      stage_seconds=dict(self.report.stage_seconds))
@@ -342,7 +343,7 @@ def mesh(
         stage_seconds["sizing"] = time.perf_counter() - t_asks
         if progress:
             progress("sizing")
-    memory_bound, tried = False, []  # tried: whole-band sizes below h that a pass lost at
+    memory_bound, tried = False, list[float]()  # tried: whole-band sizes below h that a pass lost at
     while True:
         report = _pass_report(surface, field, band, stage_seconds)
         result, lost, advice, walls, report, note = _whole_pass(surface, field, band, asks, budget, report, progress,
@@ -411,7 +412,7 @@ def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[Fea
     only_layers = field.curvature is None and not field.patch_sizes and field.function is None \
         and all(region.size >= field.size for region in field.regions)
     cut = None if only_layers else surface_pieces(surface, coarse)
-    asks, notes = no_asks(), []
+    asks, notes = no_asks(), list[str]()
     for found, found_notes in (region_asks(surface, coarse, field.regions, max_depth, cut),
                                function_asks(surface, coarse, field.function, max_depth, cut),
                                patch_asks(surface, coarse, field.patch_sizes, max_depth, cut)):
@@ -462,6 +463,7 @@ def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budge
     result, report, rounds, why = _refine_rounds(surface, field, framed, wanted, budget, progress, stage_seconds)
     if result is None:
         return why
+    assert report is not None  # a result comes with its report
     note = f"boundary refined to {frame.h:.4g} where {asks.why}, in {rounds} measure-and-refine round{'s' * (rounds > 1)}"
     lost = _losses(report, surface)
     advice, walls = "", None
@@ -495,7 +497,7 @@ def _local_depth(size: float, floor: float) -> int:
     return int(np.floor(np.log2(size / floor) + 1e-9))
 
 
-def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: int, lost: str,
+def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: float, lost: str,
                   wholes: Sequence[float], progress: Callable[[str], None] | None,
                   stage_seconds: dict, base: FeatureAsks) -> tuple[MeshResult | None, str, list[float], list[str]]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
@@ -519,7 +521,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     caller refines the whole band.  tried: the whole-band sizes that lost; notes: theirs."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
-    wholes, tried, tried_notes = list(wholes), [], []
+    wholes, tried, tried_notes = list(wholes), list[float](), list[str]()
     if max_depth < 1:  # min_size leaves no finer level to refine to
         return None, "", tried, tried_notes
     notes = [f"at boundary size {field.size:.4g} {lost}"]
@@ -532,6 +534,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             return None, "", tried, tried_notes
         if frame.levels > MAX_FRAME_LEVELS:
             return None, f"a frame of {frame.levels} levels is too deep", tried, tried_notes
+        assert wanted is not None  # _local_ask asks a band unless one of the two above
         local = _local_tets(surface, field, wanted)
         if wholes and (step > 0 or wholes[0] == field.size / 2):
             whole = estimate_tets(surface, _at_boundary_size(field, wholes[0]))
@@ -539,11 +542,11 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                 size = wholes.pop(0)
                 why = (f"the whole band at size / {field.size / size:g} is estimated at {whole} tets, fewer than the "
                        f"{local} of a round near them")
-                report = _pass_report(surface, field, size, stage_seconds)
-                kept, still, _, _, report, note = _whole_pass(surface, field, size, base, budget, report, progress,
-                                                              stage_seconds)
+                whole_report = _pass_report(surface, field, size, stage_seconds)
+                kept, still, _, _, whole_report, note = _whole_pass(surface, field, size, base, budget, whole_report,
+                                                                    progress, stage_seconds)
                 if not still:
-                    report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}", *([note] if note else [])]
+                    whole_report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}", *([note] if note else [])]
                     return kept, "", tried, []
                 tried.append(size)
                 note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
@@ -562,6 +565,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         result, report, rounds, why = _refine_rounds(surface, field, framed, wanted, budget, progress, stage_seconds)
         if result is None:
             return None, why, tried, tried_notes
+        assert report is not None  # a result comes with its report
         known = walls.thickness[walls.thickness < 2 * coarse.h] > 0  # as _thin_asks picks its samples
         beyond = int(np.max(depth - needs, initial=0, where=known))
         layers = f", {beyond} level{'s' * (beyond > 1)} finer than two layers need" if beyond > 0 else ""
@@ -598,7 +602,8 @@ def _refine_rounds(surface: Surface, field: SizeField, framed: FramedSurface, wa
     None, rounds, why not)."""
     frame, coarse_level = framed.frame, framed.coarse_level
     local = _local_tets(surface, field, wanted)
-    fewest, stalled, window, result, report = np.iinfo(np.int64).max, 0, None, None, None
+    fewest, stalled, result, report = np.iinfo(np.int64).max, 0, None, None
+    window: tuple[np.ndarray, np.ndarray] | None = None
     for rounds in range(1, MAX_REFINE_ROUNDS + 1):
         if local * BYTES_PER_TET > budget:
             return None, report, rounds, LOCAL_MEMORY
@@ -617,10 +622,11 @@ def _refine_rounds(surface: Surface, field: SizeField, framed: FramedSurface, wa
         # Only the cells near the new asks change: check those alone until they are clean.
         changed = merged.keys[wanted.level_of(merged.keys) != merged.levels]
         anchors = octant_lattice_anchors(changed, frame)
-        window = tuple(band_levels(frame, coarse_level, anchors, np.full(changed.shape[0], coarse_level), ring).keys
-                       for ring in (WINDOW_RING, WINDOW_RING - 2))
+        window = (band_levels(frame, coarse_level, anchors, np.full(changed.shape[0], coarse_level), WINDOW_RING).keys,
+                  band_levels(frame, coarse_level, anchors, np.full(changed.shape[0], coarse_level), WINDOW_RING - 2).keys)
         wanted = merged
         local = _local_tets(surface, field, wanted)
+    assert report is not None  # set by every round that does not return
     return None, report, rounds, (f"{report.bad_tets} tets were still outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
                                   f"degrees after {rounds} measure-and-refine rounds")
 
@@ -719,7 +725,7 @@ def _at_boundary_size(field: SizeField, band: float) -> SizeField:
                       field.curvature, field.layers, field.patch_sizes)
 
 
-def _fits(surface: Surface, field: SizeField, band: float, budget: int) -> bool:
+def _fits(surface: Surface, field: SizeField, band: float, budget: float) -> bool:
     return estimate_tets(surface, _at_boundary_size(field, band)) * BYTES_PER_TET <= budget
 
 
@@ -783,6 +789,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     # The lattice's tets and coordinates and the cut-edge tables are done with: freed before
     # _finish's face matching allocates its own, they are not in the peak.
     cut_faces = cuts.faces
+    assert cut_faces is not None  # cut_edges records each cut point's triangle
     del coords, tets, cuts, lattice_points, offsets
     result = _finish(points, out_tets, inside, targets, cut_faces, report, stages, surface, h)
     if not mend and report.n_tets and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]:
@@ -1180,6 +1187,7 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
         return None, asks
     # As in _mesh_at: what stuffing needed is freed before _finish allocates.
     cut_faces = cuts.faces
+    assert cut_faces is not None  # cut_edges records each cut point's triangle
     del coords, tets, cuts, spacing, lattice_points, flags, offsets
     return _finish(points, out_tets, inside, targets, cut_faces, report, stages, surface, field.size), asks
 
@@ -1460,6 +1468,7 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: 
             # part of the surface, so only the triangles of the coarse cells holding them are
             # crossed.  (A band of one level cuts unit edges only, and needs every row.)
             if near is None:
+                assert buckets is not None  # checked above, as other.size > 0
                 near = np.flatnonzero(_faces_near_unit_edges(frame, buckets, coords, starts, ends, dirs, faces.shape[0]))
             rows = rays.row_crossings(frame, snapped, faces, d, near)
         rays.add_edge_cut_fractions(rows, coords, starts, inside, dirs, fracs, status, crossed)

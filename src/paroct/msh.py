@@ -68,7 +68,18 @@ class MshFile(NamedTuple):
 
 def is_msh(data: bytes) -> bool:
     """Whether data starts (after white space) as a Gmsh MSH 2 or 4 file does."""
-    return data.startswith(b"$MeshFormat", _SPACE.match(data, _text_start(data)).end())
+    return data.startswith(b"$MeshFormat", _after_space(data, _text_start(data)))
+
+
+def _after_space(data: bytes, pos: int) -> int:
+    """Where the white space from pos on ends."""
+    match = _SPACE.match(data, pos)  # never None: _SPACE matches the empty string too
+    return pos if match is None else match.end()
+
+
+def _no_entities() -> tuple[dict, dict, dict, dict]:
+    """Entities per dimension 0..3, none yet: tag -> (physical tags, (parent dimension, parent tag))."""
+    return {}, {}, {}, {}
 
 
 def _text_start(data: bytes) -> int:
@@ -85,7 +96,8 @@ def read_msh(data: bytes) -> MshFile:
     saying what is wrong and where."""
     reader = _Reader(data)
     version, binary, size_t = reader.format()
-    names, nodes, elements, entities = {}, None, None, ({}, {}, {}, {})
+    names: dict[tuple[int, int], str] = {}
+    nodes, elements, entities = None, None, _no_entities()
     seen = set()
     read_once = {"PhysicalNames", "Entities", "PartitionedEntities", "Nodes", "ParametricNodes", "Elements"}
     while (section := reader.next_section()) is not None:
@@ -159,7 +171,7 @@ class _Reader:
 
     def _skip_space(self) -> bool:
         """Move the cursor past white space; whether anything follows."""
-        self.pos = _SPACE.match(self.data, self.pos).end()
+        self.pos = _after_space(self.data, self.pos)
         return self.pos < len(self.data)
 
     def format(self) -> tuple[int, bool, np.dtype]:
@@ -290,7 +302,7 @@ class _Reader:
         $PartitionedEntities, whose entities are the pieces of the model's entities
         (partition interfaces: pieces of an entity of another dimension)."""
         section = "PartitionedEntities" if partitioned else "Entities"
-        out = ({}, {}, {}, {})
+        out = _no_entities()
         read = self._numbers(section, binary, size_t)
         if partitioned:
             read("size_t", 1)  # partitions
@@ -301,7 +313,8 @@ class _Reader:
                 tag = int(read("int", 1)[0])
                 parent = (dim, tag)
                 if partitioned:
-                    parent = tuple(int(v) for v in read("int", 2))
+                    parent_dim, parent_tag = (int(v) for v in read("int", 2))
+                    parent = (parent_dim, parent_tag)
                     read("int", int(read("size_t", 1)[0]))  # the partitions it is in
                 read("double", 3 if dim == 0 else 6)
                 n_physical = int(read("size_t", 1)[0])
@@ -326,7 +339,7 @@ class _Reader:
         read = self._numbers("Nodes", binary, size_t)
         header = read("size_t", 4)
         n_blocks, n_nodes = int(header[0]), int(header[1])
-        tags, points = [], []
+        tag_blocks, point_blocks = [], []
         for _ in range(n_blocks):
             dim, _, parametric = (int(v) for v in read("int", 3))
             if parametric not in (0, 1) or not 0 <= dim <= 3:
@@ -334,14 +347,14 @@ class _Reader:
             count = int(read("size_t", 1)[0])
             block_tags = read("size_t", count)
             per_node = 3 + (dim if parametric else 0)  # x y z, then u (curves), u v (surfaces), u v w
-            tags.append(_tags(block_tags, "$Nodes"))
-            points.append(read("double", count * per_node).reshape(count, per_node)[:, :3])
+            tag_blocks.append(_tags(block_tags, "$Nodes"))
+            point_blocks.append(read("double", count * per_node).reshape(count, per_node)[:, :3])
         read.done()
         self._end("Nodes")
-        tags = np.concatenate(tags) if tags else np.zeros(0, dtype=np.int64)
+        tags = np.concatenate(tag_blocks) if tag_blocks else np.zeros(0, dtype=np.int64)
         if tags.size != n_nodes:
             raise MshError(f"$Nodes says it holds {n_nodes} nodes, its blocks hold {tags.size}")
-        points = np.concatenate(points).astype(np.float64) if points else np.zeros((0, 3))
+        points = np.concatenate(point_blocks).astype(np.float64) if point_blocks else np.zeros((0, 3))
         return tags, points
 
     def elements4(self, binary: bool, size_t: np.dtype, entities: tuple) -> dict:
@@ -354,7 +367,7 @@ class _Reader:
         read = self._numbers("Elements", binary, size_t)
         header = read("size_t", 4)
         n_blocks, n_elements = int(header[0]), int(header[1])
-        blocks = {}
+        blocks: dict[int, list] = {}
         total = 0
         for _ in range(n_blocks):
             dim, entity, kind = (int(v) for v in read("int", 3))
@@ -453,7 +466,7 @@ class _Reader:
         $Elements section; the first tag of an element is its physical group, the second
         its elementary entity."""
         count = self._count("Elements")
-        parts = {}
+        parts: dict[int, list] = {}
         if binary:
             done = 0
             while done < count:

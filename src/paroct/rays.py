@@ -329,9 +329,9 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
         order = written[np.argsort(keys[written])]
         _order_cells(keys, fracs, hit_faces, order)
     no_ids = np.empty(0, dtype=np.int64)
-    gathered = _gather_crossings(order, keys, fracs, signs, hit_faces, no_ids if face_ids is None else face_ids,
-                                 face_ids is not None)
-    return RowCrossings(direction, *gathered, row_box, row_starts)
+    keys, fracs, signs, hit_faces = _gather_crossings(order, keys, fracs, signs, hit_faces,
+                                                      no_ids if face_ids is None else face_ids, face_ids is not None)
+    return RowCrossings(direction, keys, fracs, signs, hit_faces, row_box, row_starts)
 
 
 @nb.njit(cache=True)

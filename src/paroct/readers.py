@@ -18,7 +18,7 @@ import os
 import re
 import stat
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -58,7 +58,7 @@ def read_surface_file(path: str | os.PathLike) -> SurfaceFile:
     except OSError as exc:
         raise ParoctError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
-        vertices, faces, face_groups, group_names = SurfaceFile(*_READERS[ext](data))
+        vertices, faces, face_groups, group_names = _READERS[ext](data)
     except _Malformed as exc:
         raise ParoctError(f"cannot read {path} as {ext[1:].upper()}: {exc}") from None
     if faces.size and (faces.min() < 0 or faces.max() >= vertices.shape[0]):
@@ -143,7 +143,7 @@ def _fans(polygons: list) -> np.ndarray:
 _STL_FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
 
 
-def _read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+def _read_stl(data: bytes) -> SurfaceFile:
     """Binary STL (84-byte header with the facet count, then 50-byte facets; bytes past the
     last facet, which some exporters pad, ignored; a count of 0 before whole facets read as
     their number), or ASCII STL when the file is text that
@@ -166,7 +166,7 @@ def _read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         n = (len(data) - 84) // 50  # a writer that streamed its facets and never wrote their count
     facets = np.frombuffer(data, dtype=_STL_FACET, count=n, offset=84)
     corners = np.ascontiguousarray(facets["corners"]).reshape(-1, 3)
-    return corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
+    return SurfaceFile(corners, np.arange(3 * n, dtype=np.int64).reshape(n, 3))
 
 
 def binary_stl_count_note(path: str | os.PathLike) -> str:
@@ -369,7 +369,7 @@ def _obj_triangles(lines: list) -> tuple[np.ndarray, np.ndarray] | None:
 
 # --- OFF ---------------------------------------------------------------------------------
 
-def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+def _read_off(data: bytes) -> SurfaceFile:
     """ASCII OFF: an ``OFF`` header (``COFF``, ``NOFF``, ... too: extra numbers on a vertex
     line are ignored), the counts ``V F [E]`` (on the header line or the next), V vertex
     lines and F face lines ``n i_1 ... i_n [colour]``, indices from 0; ``#`` comments and
@@ -379,7 +379,7 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     text = _text(data)
     fast = _off_triangles(text)
     if fast is not None:
-        return fast
+        return SurfaceFile(*fast)
     lines = [words for words in (line.split("#", 1)[0].split() for line in text.splitlines()) if words]
     if not lines or not lines[0][0].upper().endswith("OFF"):
         raise _Malformed("the first line must be OFF (or COFF, NOFF, ...)")
@@ -408,7 +408,7 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         if n < 3 or len(ids) < n:
             raise _Malformed(f"a face line reads {' '.join(words)!r}: expected n >= 3 and n indices")
         polygons.append(ids)
-    return vertices.reshape(-1, 3), _fans(polygons)
+    return SurfaceFile(vertices.reshape(-1, 3), _fans(polygons))
 
 
 def _off_triangles(text: str) -> tuple[np.ndarray, np.ndarray] | None:
@@ -416,7 +416,8 @@ def _off_triangles(text: str) -> tuple[np.ndarray, np.ndarray] | None:
     the counts on the next (comments and blank lines between), then no comment, 3
     coordinates a vertex and triangles ``3 a b c``.  The tokens are converted by numpy at
     once (a line-by-line parse took 0.33 s of armadillo's 86 k triangles)."""
-    header, pos = [], 0
+    header: list[list[str]] = []
+    pos = 0
     while len(header) < 2 and pos < len(text):
         end = text.find("\n", pos)
         end = len(text) if end < 0 else end
@@ -452,7 +453,7 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
               "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
 
 
-def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+def _read_ply(data: bytes) -> SurfaceFile:
     """PLY, ASCII or binary (either byte order): the ``vertex`` element's x, y, z (in any
     order among other properties) and the ``face`` element's vertex list (``vertex_indices``
     or ``vertex_index``, or its only list), polygons split into fans; other elements skipped."""
@@ -461,7 +462,8 @@ def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         raise _Malformed("expected a header from 'ply' to 'end_header'")
     end = match.start()
     body_start = data.find(b"\n", end) + 1 or len(data)
-    elements, fmt = [], None  # elements: [name, count, [(name, dtype) or (name, count dtype, item dtype)]]
+    elements: list[list[Any]] = []
+    fmt = None  # elements: [name, count, [(name, dtype) or (name, count dtype, item dtype)]]
     for line in _text(data[:end]).splitlines()[1:]:
         words = line.split()
         if not words or words[0] in ("comment", "obj_info"):
@@ -500,10 +502,10 @@ def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(polygons, np.ndarray):  # triangles only: (F, 3)
         if polygons.shape[1] < 3:
             raise _Malformed(f"faces of {polygons.shape[1]} vertices")
-        return vertices, _fans_of_rows(polygons)
+        return SurfaceFile(vertices, _fans_of_rows(polygons))
     if any(len(p) < 3 for p in polygons):
         raise _Malformed("a face has fewer than 3 vertices")
-    return vertices, _fans([list(map(int, p)) for p in polygons])
+    return SurfaceFile(vertices, _fans([list(map(int, p)) for p in polygons]))
 
 
 def _fans_of_rows(rows: np.ndarray) -> np.ndarray:
@@ -516,7 +518,7 @@ def _ply_ascii(body: bytes, elements: list, fmt: str) -> dict:
     """Per element name, its properties' values: a scalar property an array (count,), a list
     property an (count, n) array when every row has n items, else a list of arrays."""
     tokens = _text(body).split()
-    pos, out = 0, {}
+    pos, out = 0, dict[str, list]()
     for name, count, props in elements:
         if not props:  # an element of no properties holds no values
             out[name] = []
@@ -542,7 +544,7 @@ def _ply_ascii(body: bytes, elements: list, fmt: str) -> dict:
                     out[name] = [ids.astype(np.int64)]
                     pos += count * (n + 1)
                     continue
-        columns = [[] for _ in props]
+        columns: list[list] = [[] for _ in props]
         for _ in range(count):
             for i, prop in enumerate(props):
                 if len(prop) == 2:
@@ -580,12 +582,12 @@ def _ply_binary(body: bytes, elements: list, order: str) -> dict:
     """_ply_ascii's result for a binary body with byte order ``order`` ('<' or '>').  An element
     of scalars, or whose lists all hold the count its first row has, is read as one record
     array after its size is checked against the bytes left; others row by row."""
-    pos, out = 0, {}
+    pos, out = 0, dict[str, list]()
     for name, count, props in elements:
         if not props:  # an element of no properties holds no bytes
             out[name] = []
             continue
-        first = []  # the record layout if every list holds what the first row's does
+        first: list[tuple] = []  # the record layout if every list holds what the first row's does
         at = pos
         for prop in props:
             if len(prop) == 2:
@@ -612,7 +614,7 @@ def _ply_binary(body: bytes, elements: list, order: str) -> dict:
                 out[name] = [rows[p[0]].astype(p[2] if len(p) == 3 else p[1]) for p in props]
                 pos += count * record.itemsize
                 continue
-        columns = [[] for _ in props]
+        columns: list[list] = [[] for _ in props]
         for _ in range(count):
             for i, prop in enumerate(props):
                 size = np.dtype(prop[1]).itemsize
@@ -673,4 +675,4 @@ def _read_msh(data: bytes) -> SurfaceFile:
                        face_groups, group_names)
 
 
-_READERS = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".msh": _read_msh}
+_READERS: dict[str, Callable[[bytes], SurfaceFile]] = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".msh": _read_msh}

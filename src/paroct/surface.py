@@ -649,7 +649,7 @@ def _nested_union(solids: list, cavities: list) -> manifold3d.Manifold:
     as a ball in a hollow sphere), which are added back after, with the cavities inside them
     handled the same way, level by level (subtracting every cavity from every solid dropped
     the islands).  Containment is tested only where one bounding box holds the other."""
-    islands, inner = _inside_any(solids, cavities), []
+    islands, inner = _inside_any(solids, cavities), set[int]()
     if islands:
         inner = _inside_any(cavities, [solids[i] for i in islands])
     outer_solids = [m for i, m in enumerate(solids) if i not in islands]
@@ -662,10 +662,10 @@ def _nested_union(solids: list, cavities: list) -> manifold3d.Manifold:
     return solid
 
 
-def _inside_any(parts: list, containers: list) -> set:
+def _inside_any(parts: list, containers: list) -> set[int]:
     """Indices of parts (manifolds) that lie inside one of containers (manifolds): a bounding
     box within the container's, and no volume left when the container is subtracted."""
-    inside = set()
+    inside: set[int] = set()
     if not parts or not containers:
         return inside
     boxes = np.array([c.bounding_box() for c in containers]).reshape(-1, 2, 3)
