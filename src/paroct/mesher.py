@@ -271,7 +271,7 @@ def mesh(
     patch_sizes: Mapping[str, float] | None = None,
     thin_features: bool = True,
     min_size: float | None = None,
-    max_memory: int | None = None,
+    max_memory: float | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> MeshResult:
     """Fill a closed solid with graded fat-lattice tets, the boundary stuffed onto its surface.
