@@ -682,3 +682,22 @@ def largest_principal_curvature(points: np.ndarray, normals: np.ndarray, weights
     a = sum(wi * np.outer(qi, qi) for wi, qi in zip(w, q))
     b = sum(wi * np.outer(ni, qi) for wi, ni, qi in zip(w, dn, q))
     return float(np.linalg.svd(b @ np.linalg.inv(a), compute_uv=False)[0])
+
+
+def touching_leaves(keys: np.ndarray, levels: np.ndarray, first: int, end: int) -> list[int]:
+    """Leaves outside keys[first:end] whose closed boxes meet the closed box of one in it:
+    every pair of boxes compared, anchors decoded bit by bit."""
+    def box(i):
+        key = int(keys[i])
+        anchor = [sum(((key >> (3 * b + a)) & 1) << b for b in range(MAX_LEVEL)) for a in range(3)]
+        return anchor, 1 << (MAX_LEVEL - int(levels[i]))
+
+    own = [box(i) for i in range(first, end)]
+    out = []
+    for j in range(len(keys)):
+        if first <= j < end:
+            continue
+        b, s = box(j)
+        if any(all(b[k] <= a[k] + t and a[k] <= b[k] + s for k in range(3)) for a, t in own):
+            out.append(j)
+    return out
