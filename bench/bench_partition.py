@@ -22,18 +22,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from timing import CORPUS, fastest, surface_files  # noqa: E402
 
 import paroct  # noqa: E402
+from paroct.check import canonical_form  # noqa: E402
 from paroct.errors import ParoctError  # noqa: E402
 from paroct.partition import mesh_in_ranges  # noqa: E402
 
 
 def canonical(result) -> tuple[np.ndarray, np.ndarray]:
-    """Points in lexicographic order and tets as sorted rows of sorted point ranks."""
-    points, tets = result.mesh.points, result.mesh.tets
-    order = np.lexsort(points.T[::-1])
-    rank = np.empty(points.shape[0], dtype=np.int64)
-    rank[order] = np.arange(points.shape[0])
-    rows = np.sort(rank[tets], axis=1)
-    return points[order], rows[np.lexsort(rows.T[::-1])]
+    return canonical_form(result.mesh.points, result.mesh.tets)
 
 
 def main(argv=None) -> int:

@@ -6,8 +6,8 @@ import manifold3d
 import numpy as np
 import pytest
 
-from paroct.check import (check_mesh, distances_to_triangles, far_from_points, point_triangle_distance,
-                          sample_triangles)
+from paroct.check import (canonical_form, check_mesh, distances_to_triangles, far_from_points,
+                          point_triangle_distance, sample_triangles)
 from paroct.errors import ParoctError
 from paroct.lattice import leaf_tets
 from paroct.surface import load_surface
@@ -324,3 +324,22 @@ def test_a_mesh_of_another_solid_fails_the_check_against_the_surface():
     assert "apart at" in report.problems()[1]
     same = check_mesh(small.mesh.points, small.mesh.tets, load_surface(manifold3d.Manifold.cube([1, 1, 1])))
     assert same.ok
+
+
+def test_canonical_form_ignores_numbering_and_sees_any_change():
+    rng = np.random.default_rng(3)
+    points = rng.random((30, 3))
+    tets = np.array([rng.choice(30, 4, replace=False) for _ in range(40)])
+    want = canonical_form(points, tets)
+    perm = rng.permutation(30)  # new point ids: point i becomes point perm[i]
+    moved = np.empty_like(points)
+    moved[perm] = points
+    shuffled = perm[tets][rng.permutation(40)][:, [2, 0, 3, 1]]
+    got = canonical_form(moved, shuffled)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    other = tets.copy()
+    other[7, 1] = next(i for i in range(30) if i not in tets[7])  # one corner of one tet changed
+    assert not np.array_equal(canonical_form(points, other)[1], want[1])
+    nudged = points.copy()
+    nudged[5, 2] = np.nextafter(nudged[5, 2], 2.0)
+    assert not np.array_equal(canonical_form(nudged, tets)[0], want[0])

@@ -9,6 +9,7 @@ import pytest
 
 import paroct
 from paroct import octant
+from paroct.check import canonical_form
 from paroct.octree import balance
 from paroct.partition import leaf_ranges, mesh_in_ranges, mesh_range, touching_leaves
 
@@ -51,14 +52,7 @@ def test_touching_leaves_match_a_search_of_every_pair(seed):
 
 
 def _canonical(result):
-    """Points in lexicographic order and tets as sorted rows of sorted ranks: equal iff the
-    meshes are the same up to numbering."""
-    points, tets = result.mesh.points, result.mesh.tets
-    order = np.lexsort(points.T[::-1])
-    rank = np.empty(points.shape[0], dtype=np.int64)
-    rank[order] = np.arange(points.shape[0])
-    rows = np.sort(rank[tets], axis=1)
-    return points[order], rows[np.lexsort(rows.T[::-1])]
+    return canonical_form(result.mesh.points, result.mesh.tets)
 
 
 @pytest.mark.parametrize("name, divisions, uniform", [("bunny", 20, False), ("bunny", 40, True),

@@ -543,6 +543,19 @@ def _surface_fields(points, faces, surface: Surface, scale: float, per_triangle:
     return out
 
 
+def canonical_form(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh up to numbering: points (N, 3) in lexicographic order, and tets (M, 4) int64 as
+    rows of the sorted ranks of their points in that order, the rows sorted.  Two meshes of
+    distinct points are the same up to the order of points, tets and tet corners iff their
+    forms are equal (array_equal)."""
+    points = np.asarray(points, dtype=np.float64)
+    order = np.lexsort(points.T[::-1])
+    rank = np.empty(points.shape[0], dtype=np.int64)
+    rank[order] = np.arange(points.shape[0])
+    rows = np.sort(rank[np.asarray(tets, dtype=np.int64)], axis=1)
+    return points[order], rows[np.lexsort(rows.T[::-1])]
+
+
 def mesh_metrics(points: np.ndarray, tets: np.ndarray, surface: Surface) -> dict:
     """One set of figures for any tet mesh of ``surface`` (the benchmark's measurement).
 
