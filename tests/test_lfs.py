@@ -58,6 +58,34 @@ def test_a_sliver_is_cut_along_its_length_only():
     assert 100 <= pieces.shape[0] <= 256
 
 
+def test_triangle_pieces_end_when_an_edge_squares_above_the_spacing():
+    """An edge of length sqrt(13) at spacing math.sqrt(13): its square rounds above the
+    spacing's, its root to it, so one strip would cut it into itself (it looped forever)."""
+    spacing = math.sqrt(13.0)
+    assert spacing * spacing < 13.0
+    tris = np.array([[[0, 0, 0], [2, 3, 0], [2, 0, 0]]], dtype=np.float64)
+    pieces, owner = triangle_pieces(tris, spacing)
+    edges = pieces[:, [1, 2, 0]] - pieces
+    assert 1 < pieces.shape[0] <= 8 and np.all(np.einsum("pij,pij->pi", edges, edges) <= spacing * spacing)
+    np.testing.assert_allclose(_area(pieces).sum(), 3.0, rtol=1e-12)
+
+
+def test_a_group_of_degenerate_triangles_asks_no_curvature():
+    """Samples of no area (degenerate triangles) in a cell of their own patch: curvature 0, a
+    finite mean point, and the other groups' fits as without them (it divided by zero)."""
+    points, normals, area = _paraboloid_samples(0.3, -0.1, 0.05)
+    cells = np.floor(points / 0.5).astype(np.int64)
+    patch = np.zeros(len(points), dtype=np.int64)
+    _, want, _ = bent_cells(cells, patch, points, normals, area)
+    extra = points[:3] + 0.01
+    with_zero = (np.r_[cells, np.floor(extra / 0.5).astype(np.int64)], np.r_[patch, [1, 1, 1]],
+                 np.r_[points, extra], np.r_[normals, normals[:3]], np.r_[area, [0.0, 0.0, 0.0]])
+    centres, curvature, group = bent_cells(*with_zero)
+    zero = group[-1]
+    assert curvature[zero] == 0.0 and np.all(np.isfinite(centres))
+    np.testing.assert_array_equal(np.delete(curvature, zero), want)
+
+
 def _paraboloid_samples(a: float, b: float, step: float):
     """Points of z = a x^2 + b y^2 on a grid, their unit normals and equal areas."""
     x, y = np.meshgrid(np.arange(-2, 2, step), np.arange(-2, 2, step), indexing="ij")

@@ -375,7 +375,9 @@ def _strip_plan(tri, spacing):
         if d < shortest:
             shortest, a = d, j
         longest = max(longest, d)
-    return a, max(1, int(np.ceil(np.sqrt(longest) / spacing)))
+    # At least 2: only pieces _short_enough rejects are cut, and an edge whose square rounds
+    # above spacing**2 may have a root that rounds to spacing (k = 1 would cut it into itself).
+    return a, max(2, int(np.ceil(np.sqrt(longest) / spacing)))
 
 
 @nb.njit(cache=True)
@@ -422,7 +424,8 @@ def bent_cells(cells: np.ndarray, patch: np.ndarray, points: np.ndarray, normals
     value, the largest principal curvature (1 / r on a sphere or across a cylinder of radius
     r; noise finer than a cell averages out).  A group whose normals cancel (their
     area-weighted sum shorter than half their area: the surface folds back within the cell)
-    gets infinite curvature and is left out of the others' fits.  Returns (mean points (G,
+    gets infinite curvature and is left out of the others' fits; a group of no area
+    (degenerate triangles alone) gets 0 and weighs nothing in them.  Returns (mean points (G,
     3), curvature (G,) in 1 / model units, the group (S,) of each sample).  measure (S,) bool:
     fit only the groups holding a sample marked (the others' curvature is 0, unmeasured: they
     serve as neighbours); None: all."""
@@ -433,9 +436,13 @@ def bent_cells(cells: np.ndarray, patch: np.ndarray, points: np.ndarray, normals
     key_patch, key_cell = patch[order], linear[order]
     first = np.flatnonzero(np.r_[True, (key_patch[1:] != key_patch[:-1]) | (key_cell[1:] != key_cell[:-1])])
     group = np.empty(cells.shape[0], dtype=np.int64)
-    group[order] = np.repeat(np.arange(first.size), np.diff(np.r_[first, order.size]))
+    sizes = np.diff(np.r_[first, order.size])
+    group[order] = np.repeat(np.arange(first.size), sizes)
     area = np.add.reduceat(weight[order], first)
-    mean_point = np.add.reduceat(points[order] * weight[order, None], first) / area[:, None]
+    # A group of degenerate triangles alone has no area: its plain mean point, and no curvature.
+    weighted = np.add.reduceat(points[order] * weight[order, None], first)
+    mean_point = np.where(area[:, None] > 0, weighted / np.where(area > 0, area, 1.0)[:, None],
+                          np.add.reduceat(points[order], first) / sizes[:, None])
     normal_sum = np.add.reduceat(normals[order] * weight[order, None], first)
     length = np.linalg.norm(normal_sum, axis=1)
     folded = length < 0.5 * area
@@ -461,7 +468,7 @@ def _fitted_curvature(group_patch, group_cell, span, mean_point, unit, area, fol
     field, square = np.empty((3, 3)), np.empty((3, 3))
     p0, n0 = np.empty(3), np.empty(3)
     for g in range(ng):
-        if not fitted[g]:
+        if not fitted[g] or area[g] <= 0.0:  # unmeasured, or degenerate triangles alone (bent_cells)
             out[g] = 0.0
             continue
         if folded[g]:
