@@ -136,6 +136,11 @@ def test_thin_solid_warns_or_fails_with_advice_when_refinement_is_off():
     # Thicker, a few scraps survive: less than half the volume is an error too, not a mesh.
     with pytest.raises(ParoctError, match=r"keeps only 0\.43% of the solid's volume; thinnest wall 0\.035"):
         mesh(manifold3d.Manifold.cube([1.0, 1.0, 0.035]).rotate([23, 41, 67]), size=0.05, thin_features=False)
+    # Refinement on, but max_memory holds the boundary at size: the error says so first.
+    thin = manifold3d.Manifold.cube([1.0, 1.0, 0.035]).rotate([23, 41, 67])
+    with pytest.raises(ParoctError, match=r"keeps only 0\.43% .*; a boundary size below 0\.05 would not fit in memory "
+                                          r"\(max_memory\); thinnest wall 0\.035"):
+        mesh(thin, size=0.05, max_memory=3e6)
     # A block with a thin fin: the fin is lost, and the warning says so with a size that keeps it.
     result = mesh(_FIN_PART, size=0.1, thin_features=False)
     assert result.report.warnings and "thinnest wall" in result.report.warnings[0]

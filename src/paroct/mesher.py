@@ -388,7 +388,6 @@ def mesh(
         band = finer
     report.notes = notes
     if lost:
-        _refuse_losing_too_much(report, band, advice)
         floor_text = ""
         if thin_features and band <= floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached; "
@@ -396,6 +395,7 @@ def mesh(
             floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
         elif thin_features and band <= whole_floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
+        _refuse_losing_too_much(report, band, f"{floor_text}{advice}")  # why it went no finer, then what would keep it
         report.warnings.append(f"{floor_text}{lost}; {advice}")
     return result
 
