@@ -440,3 +440,15 @@ def test_fuzzed_surfaces_are_never_accepted_where_manifold3d_refuses_them():
         if theirs.num_tri() == ours.faces.shape[0]:  # manifold3d collapses faces with a repeated vertex, moving others
             assert ours.genus == theirs.genus() + ours.components - 1, seed
     assert accepted > 20 and refused > 50  # both verdicts were exercised
+
+
+def test_a_cavity_crossing_the_solid_is_refused_saying_where():
+    """A cube with a cavity (a shell of negative volume) poking out through its side: part of the
+    cavity bounds nothing; the error names the shell, not only an inside-out part."""
+    big = manifold3d.Manifold.cube([2.0, 2.0, 2.0]).to_mesh()
+    small = manifold3d.Manifold.cube([1.0, 1.0, 1.0]).translate([1.5, 0.5, 0.5]).to_mesh()
+    vertices = np.vstack([big.vert_properties, small.vert_properties]).astype(np.float64)
+    faces = np.vstack([big.tri_verts, small.tri_verts[:, ::-1] + len(big.vert_properties)]).astype(np.int64)
+    with pytest.raises(ParoctError, match=r"a shell of 12 triangles around \(2, 1, 1\) encloses negative volume "
+                                          r"\(-1\) and does not lie wholly inside the other shells"):
+        surface_from_arrays(vertices, faces)

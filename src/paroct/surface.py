@@ -603,8 +603,9 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
             if (cavity - everything).volume() > 1e-9 * cavity.volume():
                 x, y, z = centre
                 raise ParoctError(f"{label}: a shell of {n} triangles around ({x:.6g}, {y:.6g}, {z:.6g}) encloses negative "
-                                  f"volume ({vol:.6g}) and lies in no other shell: inside out? (a cavity must lie "
-                                  "inside a solid; reverse its triangles if it is a solid)")
+                                  f"volume ({vol:.6g}) and does not lie wholly inside the other shells: inside out, or "
+                                  "crossing their surface? (a cavity must lie inside a solid; reverse its triangles if it "
+                                  "is a solid)")
     solid = _nested_union(solids, cavities)
     volume = solid.volume()
     if not volume > 0:
