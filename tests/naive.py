@@ -642,7 +642,8 @@ def feature_curves(faces: np.ndarray, labels: np.ndarray) -> tuple[set, set]:
 def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[list[np.ndarray], list[int]]:
     """Strips by recursion: a triangle with an edge over spacing is cut by the lines parallel
     to its shortest edge (the first of equal ones, opposite corner a) at k = ceil(longest /
-    spacing) equal steps along the other two, and each strip's triangles cut again.  Returns
+    spacing) (at least 2) equal steps along the other two, and each strip's triangles cut
+    again.  Returns
     the pieces and the triangle of each, in order of triangle."""
     pieces, owner = [], []
 
@@ -653,7 +654,7 @@ def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[list[np.ndarra
             owner.append(t)
             return
         a = int(np.argmin(opposite))
-        k = max(1, math.ceil(math.sqrt(max(opposite)) / spacing))
+        k = max(2, math.ceil(math.sqrt(max(opposite)) / spacing))  # 1 when the root rounds to spacing
         pa, pb, pc = tri[a], tri[(a + 1) % 3], tri[(a + 2) % 3]
         p = [pa + (pb - pa) * i / k for i in range(k + 1)]
         q = [pa + (pc - pa) * i / k for i in range(k + 1)]
