@@ -326,7 +326,7 @@ def _near(cells, marked, ring):
 def triangle_pieces(corners: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Triangles (S, 3, 3) cut into pieces with no edge longer than spacing: the pieces'
     corners (P, 3, 3) float64 and the triangle (P,) each came from, in order of triangle.
-    A triangle with a longer edge is cut into k = ceil(longest / spacing) strips by the lines
+    A triangle with a longer edge is cut into k = ceil(longest / spacing) >= 2 strips by the lines
     parallel to its shortest edge through the points that split the other two edges in k
     equal parts, each strip a triangle and the rest two (2 k - 1 pieces), and the pieces cut
     the same way until none is too long.  A sliver of length L gives about 2 L / spacing
