@@ -117,3 +117,9 @@ def test_a_part_thinner_than_the_lattice_is_refused_in_ranges():
     surface = paroct.load_surface(manifold3d.Manifold.cube([1.0, 1.0, 0.01]))
     with pytest.raises(paroct.ParoctError, match="no tets"):
         mesh_in_ranges(surface, 0.1, n_parts=2)
+
+
+@pytest.mark.parametrize("n_parts", [0, -2, 2.5, True, "3"])
+def test_a_range_count_that_is_no_whole_number_is_refused_in_one_line(n_parts):
+    with pytest.raises(paroct.ParoctError, match=r"n_parts = .*: must be a whole number of ranges, at least 1"):
+        mesh_in_ranges(DATA / "bunny.stl", n_parts=n_parts, divisions=10)

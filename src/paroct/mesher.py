@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping, NamedTuple, Sequence
 
 import numba as nb
 import numpy as np
@@ -746,17 +746,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
                                     notes=list(report.notes))
     stages = _Stages(report, progress)
     h = field.size
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
-    if frame.levels > MAX_FRAME_LEVELS:
-        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
-    report.levels = frame.levels
-    stages.done("frame")
-
-    snapped, faces, crossings = checked_x_rows(surface, frame)
-    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
-    report.n_leaves = int(keys.shape[0])
-    report.leaf_levels = _leaf_levels(frame, levels)
-    stages.done("octree")
+    frame, snapped, faces, crossings, keys, levels, band = pass_leaves(surface, field, report, stages)
 
     # The band's vertices come first, so its classes, cut edges and warps keep their ids.
     # Stuffing cuts no template here (every tet it touches is a fat tet of the band), so the
@@ -805,6 +795,38 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
         advice, walls = _walls_of_loss(surface, frame, snapped, faces, crossings, report)
         stages.done("features")
     return result, lost, advice, walls
+
+
+class PassLeaves(NamedTuple):
+    """The octree of a pass with its band on one level (pass_leaves): the frame, the surface in
+    it (snapped vertices, faces, {X_AXIS_DIRECTION: x-row crossings}) and graded_leaves' sorted
+    leaves (keys, levels) and band."""
+
+    frame: FatFrame
+    snapped: np.ndarray
+    faces: np.ndarray
+    crossings: dict
+    keys: np.ndarray
+    levels: np.ndarray
+    band: BandStuffing
+
+
+def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: _Stages) -> PassLeaves:
+    """The frame at field.size (ParoctError if deeper than MAX_FRAME_LEVELS), the surface's x
+    rows and the leaves of a pass whose band is one level (graded_leaves); fills the report's
+    levels, leaves and leaf levels."""
+    h = field.size
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
+    if frame.levels > MAX_FRAME_LEVELS:
+        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
+    report.levels = frame.levels
+    stages.done("frame")
+    snapped, faces, crossings = checked_x_rows(surface, frame)
+    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
+    report.n_leaves = int(keys.shape[0])
+    report.leaf_levels = _leaf_levels(frame, levels)
+    stages.done("octree")
+    return PassLeaves(frame, snapped, faces, crossings, keys, levels, band)
 
 
 def _walls_of_loss(surface: Surface, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, crossings: dict,

@@ -19,11 +19,12 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .frame import CUBE_CORNERS, FatFrame, fat_frame
+from .errors import ParoctError
+from .frame import CUBE_CORNERS, FatFrame
 from .lattice import LeafVertices, graded_tets, number_vertices
-from .mesher import (BandStuffing, MeshResult, _at_boundary_size, _finish, _losses, _pass_report,
-                     _refuse_losing_too_much, _Stages, checked_x_rows, graded_leaves, resolve_size, vertex_classes)
-from .octant import MAX_LEVEL, morton_coords, morton_key, octant_last_key
+from .mesher import (BandStuffing, MeshResult, _at_boundary_size, _available_memory, _check_memory, _finish, _losses,
+                     _pass_report, _refuse_losing_too_much, _Stages, pass_leaves, resolve_size, vertex_classes)
+from .octant import MAX_LEVEL, morton_coords, morton_key, octant_last_key, sorted_lookup
 from .octree import octant_lattice_anchors
 from .sizing import size_field
 from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, stuff
@@ -96,15 +97,6 @@ def pack_coords(coords: np.ndarray) -> np.ndarray:
     return coords[:, 0] | (coords[:, 1] << _COORD_BITS) | (coords[:, 2] << (2 * _COORD_BITS))
 
 
-def _member(sorted_values: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(position of each value in sorted_values, whether it is there), by binary search."""
-    at = np.searchsorted(sorted_values, values)
-    clipped = np.minimum(at, max(sorted_values.shape[0] - 1, 0))
-    found = (at < sorted_values.shape[0]) & (sorted_values[clipped] == values) if sorted_values.size else \
-        np.zeros(values.shape[0], dtype=bool)
-    return clipped, found
-
-
 @dataclass(frozen=True)
 class BandIndex:
     """The band (graded_leaves' BandStuffing) with its vertices and cut edges sorted once, so
@@ -128,12 +120,12 @@ class BandIndex:
 
     def vertices_at(self, coords: np.ndarray) -> np.ndarray:
         """Band ids (ascending, distinct) of the band vertices among coords (K, 3)."""
-        at, found = _member(self.vertex_keys, pack_coords(coords))
+        at, found = sorted_lookup(self.vertex_keys, pack_coords(coords))
         return np.unique(self.vertex_ids[at[found]])
 
     def edges(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """The cut edge of each (start, end) pair of band ids; AssertionError if one is none."""
-        at, found = _member(self.edge_keys, starts.astype(np.int64) * self.band.coords.shape[0] + ends)
+        at, found = sorted_lookup(self.edge_keys, starts.astype(np.int64) * self.band.coords.shape[0] + ends)
         if not found.all():
             raise AssertionError(f"{int((~found).sum())} mixed edges of a range are not cut edges of the band")
         return self.edge_ids[at]
@@ -207,10 +199,10 @@ def _range_cuts(band: BandIndex, in_range: np.ndarray, coords: np.ndarray, tets:
     cut_ids = band.edges(in_range[starts], in_range[ends])  # mixed edges join band vertices
     wanted = band.band.targets[in_range]
     sorted_ids = np.argsort(cut_ids)
-    at, held = _member(cut_ids[sorted_ids], wanted)
+    at, held = sorted_lookup(cut_ids[sorted_ids], wanted)
     extra = np.unique(wanted[(wanted >= 0) & ~held])
-    start_at, start_found = _member(in_range, band_cuts.starts[extra])
-    end_at, end_found = _member(in_range, band_cuts.ends[extra])
+    start_at, start_found = sorted_lookup(in_range, band_cuts.starts[extra])
+    end_at, end_found = sorted_lookup(in_range, band_cuts.ends[extra])
     both = start_found & end_found
     extra, extra_starts, extra_ends = extra[both], start_at[both].astype(starts.dtype), end_at[both].astype(ends.dtype)
     # Extra edges are in no tet: the lookup table (head, upper, chain) never reaches them.
@@ -221,23 +213,22 @@ def _range_cuts(band: BandIndex, in_range: np.ndarray, coords: np.ndarray, tets:
     cuts = CutEdges(np.concatenate([starts, extra_starts]), np.concatenate([ends, extra_ends]),
                     np.concatenate([directions, band_cuts.directions[extra].astype(directions.dtype)]),
                     band_cuts.fracs[all_ids], band_cuts.points[all_ids], table, faces)
-    extra_at, extra_held = _member(extra, wanted)
+    extra_at, extra_held = sorted_lookup(extra, wanted)
     targets = np.full(coords.shape[0], -1, dtype=np.int64)
     held_ids = sorted_ids[at] if sorted_ids.size else at
     targets[: in_range.shape[0]] = np.where(held, held_ids, np.where(extra_held, cut_ids.shape[0] + extra_at, -1))
     return cuts, all_ids, targets
 
 
-def merge_ranges(pieces: list[RangeMesh], n_cuts: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                                                 np.ndarray]:
+def merge_ranges(pieces: list[RangeMesh], n_cuts: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pieces as one stuffed mesh, each lattice vertex once (by its coordinates), then the
     band's n_cuts cut points in band order, as one pass over the whole octree lays them out:
     (points (L + n_cuts, 3), tets (M, 4) int32, inside (L,), targets (L,) into the band's cut
-    edges, vertex_keys (L,)).  A vertex or cut point the pieces place differently is an
+    edges).  A vertex or cut point the pieces place differently is an
     AssertionError: stuffing in ranges must agree where they meet."""
     all_keys = np.concatenate([p.vertex_keys for p in pieces])
-    vertex_keys, first, vertex_of = np.unique(all_keys, return_index=True, return_inverse=True)
-    n_vertices = vertex_keys.shape[0]
+    _, first, vertex_of = np.unique(all_keys, return_index=True, return_inverse=True)
+    n_vertices = first.shape[0]
     points = np.empty((n_vertices + n_cuts, 3))
     placed = np.zeros(n_cuts, dtype=bool)
     inside = np.concatenate([p.inside for p in pieces])[first]
@@ -259,7 +250,7 @@ def merge_ranges(pieces: list[RangeMesh], n_cuts: int) -> tuple[np.ndarray, np.n
         tets.append(new_id[p.tets].astype(np.int32))
         start += n
     points[n_vertices:][~placed] = np.nan  # cut points no range uses: no tet refers to them
-    return points, np.concatenate(tets) if tets else np.zeros((0, 4), dtype=np.int32), inside, targets, vertex_keys
+    return points, np.concatenate(tets) if tets else np.zeros((0, 4), dtype=np.int32), inside, targets
 
 
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
@@ -273,23 +264,21 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     every corpus part at diag/40 and /80), in another vertex order.  Refinement near thin
     walls, curvature and the other asks are not done per range yet; a pass whose tets leave
     the bound warns (mending needs the whole mesh)."""
+    if isinstance(n_parts, (bool, np.bool_)) or not isinstance(n_parts, (int, np.integer)) or n_parts < 1:
+        raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = _at_boundary_size(size_field(h, max_size), h)
+    _check_memory(surface, field, _available_memory())
     report = _pass_report(surface, field, h, {})
     stages = _Stages(report, None)
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
-    report.levels = frame.levels
-    snapped, faces, crossings = checked_x_rows(surface, frame)
-    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
-    report.n_leaves = int(keys.shape[0])
-    stages.done("octree")
+    frame, _, _, _, keys, levels, band = pass_leaves(surface, field, report, stages)
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds, index = leaf_ranges(keys.shape[0], n_parts), BandIndex.build(band)
-    pieces = [mesh_range(frame, keys, levels, index, int(bounds[r]), int(bounds[r + 1])) for r in range(n_parts)]
+    pieces = [mesh_range(frame, keys, levels, index, int(bounds[r]), int(bounds[r + 1])) for r in range(int(n_parts))]
     stages.done("stuff")
-    points, tets, inside, targets, _ = merge_ranges(pieces, band.cuts.starts.shape[0])
+    points, tets, inside, targets = merge_ranges(pieces, band.cuts.starts.shape[0])
     cut_faces = band.cuts.faces
     assert cut_faces is not None  # cut_edges records each cut point's triangle
     result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
