@@ -811,10 +811,13 @@ class PassLeaves(NamedTuple):
     band: BandStuffing
 
 
-def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: _Stages) -> PassLeaves:
+def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: _Stages,
+                band_of: Callable[[FatFrame, np.ndarray, np.ndarray, dict, MeshReport], FinestBand] | None = None
+                ) -> PassLeaves:
     """The frame at field.size (ParoctError if deeper than MAX_FRAME_LEVELS), the surface's x
     rows and the leaves of a pass whose band is one level (graded_leaves); fills the report's
-    levels, leaves and leaf levels."""
+    levels, leaves and leaf levels.  band_of(frame, snapped, faces, crossings, report) gives
+    the band (default finest_band; partition.finest_band_in_ranges computes it in ranges)."""
     h = field.size
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
     if frame.levels > MAX_FRAME_LEVELS:
@@ -822,7 +825,8 @@ def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: 
     report.levels = frame.levels
     stages.done("frame")
     snapped, faces, crossings = checked_x_rows(surface, frame)
-    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
+    finest = None if band_of is None else band_of(frame, snapped, faces, crossings, report)
+    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report, finest)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = _leaf_levels(frame, levels)
     stages.done("octree")
@@ -1303,24 +1307,26 @@ class BandStuffing:
     targets: np.ndarray
 
 
-def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Surface, field: SizeField,
-                  report: MeshReport) -> tuple[np.ndarray, np.ndarray, BandStuffing]:
-    """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may hold
-    inside tets, and the stuffing data of the band.
+class FinestBand(NamedTuple):
+    """The band of a pass whose band is one level (finest_band): surface_keys (S,) sorted keys
+    of the finest cells that meet the surface (octree.surface_cells), keys (B,) sorted keys of
+    the band's cells, and stuffing, the band's BandStuffing."""
 
-    The finest level holds the *band*: every cell with corners of both classes (cut cells: all
-    tets that stuffing cuts) and every cell with a corner that stuffing warps.  So stuffing only
-    touches fat tets of one size (the Labelle-Shewchuk setting), and the boundary is exactly the
-    uniform lattice's.  Every other leaf has all finest-level lattice points in its closure of
-    one class (else a fine edge in it would be cut and its cell in the band), and none warped:
-    its anchor's winding number classifies it, outside leaves are dropped, and inside leaves
-    emit fat tets or transition templates.  The size field decides the rest, up to max_size.
-    """
+    surface_keys: np.ndarray
+    keys: np.ndarray
+    stuffing: BandStuffing
+
+
+def finest_band(frame: FatFrame, snapped, faces, crossings: dict, report: MeshReport) -> FinestBand:
+    """The band at the frame's finest level: every cell with corners of both classes (cut
+    cells: all tets that stuffing cuts) and every cell with a corner that stuffing warps,
+    with the cut cells' corners, classes, cut edges and warps (graded_leaves builds the
+    octree around it).  crossings: {X_AXIS_DIRECTION: x-row crossings, ...}; the other
+    directions' rows are crossed here and added to it."""
     finest = frame.levels
-    x_crossings = crossings[X_AXIS_DIRECTION]
     met = surface_cells(frame, snapped, faces, rays.snap_bits(frame), finest)
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
-    corner_class = rays.winding_numbers(x_crossings, corners.coords) > 0
+    corner_class = rays.winding_numbers(crossings[X_AXIS_DIRECTION], corners.coords) > 0
     is_cut = mixed_rows(corners.corner_ids, corner_class)
     cut_keys = np.compress(is_cut, met)
     cut_cells, kept = _restrict(corners, is_cut)
@@ -1329,21 +1335,41 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     targets = warp_targets(cuts, cut_cells.coords, frame.h)
     around = _cells_around(cut_cells.coords, targets >= 0, MAX_LEVEL - finest)
     band = unique_level_keys(np.concatenate([cut_keys, around]), finest)
+    return FinestBand(met, band, BandStuffing(cut_cells.coords, inside, cuts, targets))
 
+
+def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Surface, field: SizeField,
+                  report: MeshReport, band: FinestBand | None = None) -> tuple[np.ndarray, np.ndarray, BandStuffing]:
+    """Sorted leaves (keys (N,) int64, levels (N,) int8) of the 2:1-balanced octree that may hold
+    inside tets, and the stuffing data of the band.
+
+    The finest level holds the *band* (finest_band, unless given): every cell with corners of
+    both classes (cut cells: all tets that stuffing cuts) and every cell with a corner that
+    stuffing warps.  So stuffing only touches fat tets of one size (the Labelle-Shewchuk
+    setting), and the boundary is exactly the uniform lattice's.  Every other leaf has all
+    finest-level lattice points in its closure of one class (else a fine edge in it would be
+    cut and its cell in the band), and none warped: its anchor's winding number classifies
+    it, outside leaves are dropped, and inside leaves emit fat tets or transition templates.
+    The size field decides the rest, up to max_size.
+    """
+    finest = frame.levels
+    x_crossings = crossings[X_AXIS_DIRECTION]
+    if band is None:
+        band = finest_band(frame, snapped, faces, crossings, report)
     seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
-                       prune=surface_prune(frame, met, x_crossings))
+                       prune=surface_prune(frame, band.surface_keys, x_crossings))
     seed_keys, seed_levels, _ = seeds
     if np.all(seed_levels == finest):  # a uniform lattice: already balanced, nothing to complete
-        keys = sorted_unique(np.concatenate([band, seed_keys]))
+        keys = sorted_unique(np.concatenate([band.keys, seed_keys]))
         levels = np.full(keys.shape[0], finest, dtype=np.int8)
     else:
-        keys, levels = balance(np.concatenate([band, seed_keys]),
-                               np.concatenate([np.full(band.shape[0], finest, dtype=np.int8), seed_levels]))
+        keys, levels = balance(np.concatenate([band.keys, seed_keys]),
+                               np.concatenate([np.full(band.keys.shape[0], finest, dtype=np.int8), seed_levels]))
     in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
-    in_band[fine] = sorted_lookup(band, keys[fine])[1]
+    in_band[fine] = sorted_lookup(band.keys, keys[fine])[1]
     keep = kept_leaves(frame, keys, levels, in_band, seeds, x_crossings)
-    return np.compress(keep, keys), np.compress(keep, levels), BandStuffing(cut_cells.coords, inside, cuts, targets)
+    return np.compress(keep, keys), np.compress(keep, levels), band.stuffing
 
 
 @nb.njit(cache=True, parallel=True)
