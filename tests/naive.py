@@ -702,3 +702,43 @@ def touching_leaves(keys: np.ndarray, levels: np.ndarray, first: int, end: int) 
         if any(all(b[k] <= a[k] + t and a[k] <= b[k] + s for k in range(3)) for a, t in own):
             out.append(j)
     return out
+
+
+def faces_near_interval(snapped: np.ndarray, faces: np.ndarray, bits: int, levels: int, margin: int, first: int,
+                        end: int) -> list[int]:
+    """The triangles whose box of closed finest cells, grown by margin cells, holds a cell of
+    Morton key in [first, end): every cell of the box keyed and compared."""
+    out, top = [], (1 << levels) - 1
+    for f, tri in enumerate(faces):
+        pts = snapped[tri]
+        lo = [max(int(pts[:, k].min()) // (1 << bits) - 1 - margin, 0) for k in range(3)]
+        hi = [min(int(pts[:, k].max()) // (1 << bits) + margin, top) for k in range(3)]
+        cells = [(x, y, z) for x in range(lo[0], hi[0] + 1) for y in range(lo[1], hi[1] + 1)
+                 for z in range(lo[2], hi[2] + 1)]
+        shift = MAX_LEVEL - levels
+        if any(first <= morton_key(x << shift, y << shift, z << shift) < end for x, y, z in cells):
+            out.append(f)
+    return out
+
+
+def cells_near_interval(cells: np.ndarray, levels: int, first: int, end: int) -> list[bool]:
+    """For each finest cell (K, 3) (cell coordinates of a frame of ``levels`` levels): whether
+    a cell of key in [first, end) is at Chebyshev distance at most 1 from it."""
+    shift, n = MAX_LEVEL - levels, 1 << levels
+    owned = [(x, y, z) for x in range(n) for y in range(n) for z in range(n)
+             if first <= morton_key(x << shift, y << shift, z << shift) < end]
+    return [any(max(abs(int(c[0]) - x), abs(int(c[1]) - y), abs(int(c[2]) - z)) <= 1 for x, y, z in owned)
+            for c in cells]
+
+
+def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, basis: np.ndarray, points: np.ndarray) -> list[int]:
+    """The triangles whose row coordinates (basis rows 1 and 2 of the snapped vertices, over
+    2**bits) span a box holding the row of one of the lattice points."""
+    rows = {(int(r[0]), int(r[1])) for r in points @ basis[1:].T}
+    out = []
+    for f, tri in enumerate(faces):
+        proj = snapped[tri] @ basis[1:].T / float(1 << bits)
+        lo, hi = proj.min(axis=0), proj.max(axis=0)
+        if any(lo[0] <= a <= hi[0] and lo[1] <= b <= hi[1] for a, b in rows):
+            out.append(f)
+    return out

@@ -1,6 +1,7 @@
 """Meshing in Morton ranges (paroct.partition): the halo of a range against a naive search, and
 the merged mesh against the one-process pass, tet for tet and bit for bit."""
 
+import dataclasses
 from pathlib import Path
 
 import manifold3d
@@ -123,3 +124,132 @@ def test_a_part_thinner_than_the_lattice_is_refused_in_ranges():
 def test_a_range_count_that_is_no_whole_number_is_refused_in_one_line(n_parts):
     with pytest.raises(paroct.ParoctError, match=r"n_parts = .*: must be a whole number of ranges, at least 1"):
         mesh_in_ranges(DATA / "bunny.stl", n_parts=n_parts, divisions=10)
+
+
+def _random_faces(seed: int, levels: int, bits: int, n_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """Snapped vertices (some off the frame, some on cell planes) and random triangles."""
+    rng = np.random.default_rng(seed)
+    scale = 1 << (levels + bits)
+    snapped = rng.integers(-scale // 8, scale + scale // 8, size=(3 * n_faces, 3)).astype(np.int64)
+    snapped[::5] &= ~np.int64((1 << bits) - 1)  # on lattice planes
+    faces = rng.integers(0, snapped.shape[0], size=(n_faces, 3)).astype(np.int64)
+    faces[::7, 1] = faces[::7, 0]  # some small, degenerate triangles
+    return snapped, faces
+
+
+def _random_interval(rng, levels: int) -> tuple[int, int]:
+    step = 1 << (3 * (ML - levels))
+    cells = np.sort(rng.integers(0, 1 << (3 * levels), size=2))
+    return int(cells[0]) * step, (int(cells[1]) + int(rng.integers(0, 2))) * step
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_faces_near_an_interval_match_a_search_of_every_cell(seed):
+    from paroct.partition import _faces_near_interval
+
+    levels, bits = 3, 4
+    snapped, faces = _random_faces(seed, levels, bits, 60)
+    rng = np.random.default_rng(2000 + seed)
+    intervals = [_random_interval(rng, levels) for _ in range(4)] + [(0, 1 << (3 * ML)), (5, 5)]
+    for first, end in intervals:
+        for margin in (0, 2):
+            got = np.flatnonzero(_faces_near_interval(snapped, faces, bits, levels, margin, first, end))
+            assert got.tolist() == naive.faces_near_interval(snapped, faces, bits, levels, margin, first, end)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_cells_near_an_interval_match_a_search_of_every_cell(seed):
+    from paroct.partition import _cells_near_interval
+
+    levels = 3
+    rng = np.random.default_rng(3000 + seed)
+    cells = rng.integers(0, 1 << levels, size=(80, 3))
+    keys = octant.morton_keys(cells << (ML - levels))
+    for first, end in [_random_interval(rng, levels) for _ in range(4)]:
+        assert _cells_near_interval(keys, levels, first, end).tolist() == \
+            naive.cells_near_interval(cells, levels, first, end)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_faces_over_rows_match_a_search_of_every_row(seed):
+    from paroct.frame import EDGE_DIRECTIONS, row_basis
+    from paroct.partition import faces_over_rows
+
+    levels, bits = 3, 4
+    snapped, faces = _random_faces(seed, levels, bits, 60)
+    rng = np.random.default_rng(4000 + seed)
+    for direction in range(EDGE_DIRECTIONS.shape[0]):
+        points = rng.integers(0, (1 << levels) + 1, size=(int(rng.integers(1, 6)), 3)).astype(np.int64)
+        got = faces_over_rows(snapped, faces, bits, direction, points)
+        assert got.tolist() == naive.faces_over_rows(snapped, faces, bits, row_basis(direction), points)
+
+
+def _pass_surface(surface, size):
+    from paroct.frame import fat_frame
+    from paroct.mesher import checked_x_rows
+
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
+    return (frame, *checked_x_rows(surface, frame))
+
+
+def _same_band(a, b) -> None:
+    assert np.array_equal(a.surface_keys, b.surface_keys) and np.array_equal(a.keys, b.keys)
+    x, y = a.stuffing, b.stuffing
+    for name in ("coords", "inside", "targets"):
+        assert np.array_equal(getattr(x, name), getattr(y, name)), name
+    for name in ("starts", "ends", "directions", "points", "faces"):
+        assert np.array_equal(getattr(x.cuts, name), getattr(y.cuts, name)), name
+    assert np.array_equal(x.cuts.fracs.view(np.int64), y.cuts.fracs.view(np.int64))
+    assert all(np.array_equal(p, q) for p, q in zip(x.cuts.table, y.cuts.table))
+
+
+_WAVY = manifold3d.Manifold.cylinder(2.0, 0.6, 0.25, 24).rotate([30, 50, 10]) + \
+    manifold3d.Manifold.sphere(0.5, 24).translate([0.3, 0.2, 1.5]) - manifold3d.Manifold.cube([0.3, 0.3, 4.0], True)
+
+
+@pytest.mark.parametrize("source, divisions", [("bunny", 40), ("angle_block", 30), ("wavy", 25)])
+def test_the_band_in_key_ranges_is_the_whole_surface_band(source, divisions):
+    """Each range's band from the triangles near it alone, merged: the same arrays as the band
+    of the whole surface (cells, corners, classes, cut points bit for bit, warps, lookup
+    table), however the key space is cut, ranges ending inside octants or empty included."""
+    from paroct.mesher import MeshReport, finest_band
+    from paroct.partition import band_in_range, finest_band_in_ranges, merge_band_pieces
+
+    surface = paroct.load_surface(_WAVY if source == "wavy" else DATA / f"{source}.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / divisions
+    frame, snapped, faces, crossings = _pass_surface(surface, size)
+    report = MeshReport(size, frame.levels)
+    whole = finest_band(frame, snapped, faces, dict(crossings), report)
+    assert whole.stuffing.targets.max() >= 0 and whole.stuffing.cuts.starts.size > 0
+    for n_parts in (1, 2, 7):
+        ranged_report = MeshReport(size, frame.levels)
+        _same_band(finest_band_in_ranges(frame, snapped, faces, n_parts, ranged_report), whole)
+        assert ranged_report.unresolved_cuts == report.unresolved_cuts
+    rng = np.random.default_rng(7)
+    step = 1 << (3 * (ML - frame.levels))
+    cuts = np.sort(rng.choice(whole.keys, size=5, replace=False)) + step * rng.integers(0, 2, size=5)
+    bounds = [0, *cuts.tolist(), int(cuts[-1]), 1 << (3 * ML)]  # an empty range before the last
+    pieces = [band_in_range(frame, snapped, faces, bounds[r], bounds[r + 1]) for r in range(len(bounds) - 1)]
+    _same_band(merge_band_pieces(frame, pieces, MeshReport(size, frame.levels)), whole)
+
+
+def test_band_pieces_that_disagree_are_refused():
+    """A cut point two pieces hold must come out the same in both: a piece whose copy differs
+    in its last bit is an AssertionError, not a merged band."""
+    from paroct.mesher import MeshReport
+    from paroct.partition import band_bounds, band_in_range, merge_band_pieces, pack_coords
+
+    surface = paroct.load_surface(DATA / "bunny.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 20
+    frame, snapped, faces, _ = _pass_surface(surface, size)
+    bounds = band_bounds(frame, snapped, 3)
+    pieces = [band_in_range(frame, snapped, faces, int(bounds[r]), int(bounds[r + 1])) for r in range(3)]
+    first = set(zip(pack_coords(pieces[0].edge_starts).tolist(), pack_coords(pieces[0].edge_ends).tolist()))
+    second = zip(pack_coords(pieces[1].edge_starts).tolist(), pack_coords(pieces[1].edge_ends).tolist())
+    shared = np.array([e for e, pair in enumerate(second) if pair in first])
+    assert shared.size > 0
+    fracs = pieces[1].fracs.copy()
+    fracs[shared[0]] = np.nextafter(fracs[shared[0]], 2.0)
+    pieces[1] = dataclasses.replace(pieces[1], fracs=fracs)
+    with pytest.raises(AssertionError, match="disagree on a shared cut edge"):
+        merge_band_pieces(frame, pieces, MeshReport(size, frame.levels))

@@ -4,10 +4,13 @@ range numbered, classified, emitted and stuffed on its own, and the pieces merge
 The first working step toward meshes of 1e9 tets on many workers (docs/design.md, "Toward
 partitions by Morton ranges").  What a range needs beyond its own leaves is one ring of
 leaves touching them (``touching_leaves``): the split points of its transition leaves and
-the classes of its vertices depend on no other leaf.  Band data (the cut cells' classes,
-cut points and warps, O(surface)) comes from one process, as do the octree and the finish
-(pinch repair, quality, compaction); mending by other warps, which needs the whole mesh, is
-not done per range (a range pass whose tets leave the bound says so).  The merged mesh is
+the classes of its vertices depend on no other leaf.  The band (the surface's cells, the cut
+cells' classes, cut points and warps: the O(surface) work) is computed in ranges of the key
+space too, each from the triangles near it (``band_in_range``), and merged into the whole
+surface's band array for array (``merge_band_pieces``).  The octree and the finish (pinch
+repair, quality, compaction) run in one process; mending by other warps, which needs the
+whole mesh, is not done per range (a range pass whose tets leave the bound says so).  The
+merged mesh is
 the one-process pass's, tet for tet and bit for bit (tests/test_partition.py), because every
 tie stuffing breaks is broken by lattice coordinates, not by vertex ids (sessions 41, 43).
 """
@@ -19,15 +22,18 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from . import rays
 from .errors import ParoctError
-from .frame import CUBE_CORNERS, FatFrame
+from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
-from .mesher import (BandStuffing, MeshResult, _at_boundary_size, _available_memory, _check_memory, _finish, _losses,
-                     _pass_report, _refuse_losing_too_much, _Stages, pass_leaves, resolve_size, vertex_classes)
-from .octant import MAX_LEVEL, morton_coords, morton_key, octant_last_key, sorted_lookup
-from .octree import octant_lattice_anchors
+from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
+                     _cells_around, _check_memory, _finish, _losses, _pass_report, _refuse_losing_too_much, _restrict,
+                     _Stages, cut_edges, pass_leaves, resolve_size, vertex_classes)
+from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
+                     sorted_lookup)
+from .octree import octant_lattice_anchors, surface_cells, unique_level_keys
 from .sizing import size_field
-from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, stuff
+from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
 #: Bits per axis of a packed lattice coordinate (pack_coords): lattice coordinates of a frame
@@ -253,11 +259,297 @@ def merge_ranges(pieces: list[RangeMesh], n_cuts: int) -> tuple[np.ndarray, np.n
     return points, np.concatenate(tets) if tets else np.zeros((0, 4), dtype=np.int32), inside, targets
 
 
+@nb.njit(cache=True)
+def _faces_near_interval(snapped, faces, bits, levels, margin, first, end):
+    """Mask (F,) of the triangles whose bounding box, grown by ``margin`` finest cells, meets
+    a finest cell of Morton key in [first, end) (MAX_LEVEL keys): an exact descent from the
+    root through the octants that the box meets and the interval holds only in part."""
+    out = np.zeros(faces.shape[0], dtype=np.bool_)
+    shift = MAX_LEVEL - levels
+    top = (np.int64(1) << levels) - 1
+    stack_x = np.empty(8 * levels + 8, dtype=np.int64)
+    stack_y = np.empty_like(stack_x)
+    stack_z = np.empty_like(stack_x)
+    stack_side = np.empty_like(stack_x)
+    lo = np.empty(3, dtype=np.int64)
+    hi = np.empty(3, dtype=np.int64)
+    for f in range(faces.shape[0]):
+        for k in range(3):
+            a = min(snapped[faces[f, 0], k], snapped[faces[f, 1], k], snapped[faces[f, 2], k])
+            b = max(snapped[faces[f, 0], k], snapped[faces[f, 1], k], snapped[faces[f, 2], k])
+            lo[k] = max((a >> bits) - 1 - margin, 0)  # the closed cells a coordinate touches
+            hi[k] = min((b >> bits) + margin, top)
+        if lo[0] > hi[0] or lo[1] > hi[1] or lo[2] > hi[2]:
+            continue
+        n = 1
+        stack_x[0], stack_y[0], stack_z[0], stack_side[0] = 0, 0, 0, top + 1
+        while n > 0 and not out[f]:
+            n -= 1
+            x, y, z, side = stack_x[n], stack_y[n], stack_z[n], stack_side[n]
+            if x > hi[0] or y > hi[1] or z > hi[2] or x + side <= lo[0] or y + side <= lo[1] or z + side <= lo[2]:
+                continue
+            key = morton_key(x << shift, y << shift, z << shift)
+            last = key + ((side * side * side) << (3 * shift)) - 1
+            if last < first or key >= end:
+                continue
+            if first <= key and last < end:
+                out[f] = True
+                continue
+            half = side >> 1
+            for c in range(8):
+                stack_x[n] = x + half * (c & 1)
+                stack_y[n] = y + half * ((c >> 1) & 1)
+                stack_z[n] = z + half * ((c >> 2) & 1)
+                stack_side[n] = half
+                n += 1
+    return out
+
+
+@nb.njit(cache=True)
+def _cells_near_interval(keys, levels, first, end):
+    """Mask (K,) of the finest cells (keys, of a frame of ``levels`` levels) within one cell of
+    a cell of key in [first, end): one of the 27 cells around it, itself included, is there."""
+    out = np.zeros(keys.shape[0], dtype=np.bool_)
+    step = np.int64(1) << (MAX_LEVEL - levels)
+    root = np.int64(1) << MAX_LEVEL
+    for i in range(keys.shape[0]):
+        x0, y0, z0 = morton_coords(keys[i])
+        for c in range(27):
+            x = x0 + (c % 3 - 1) * step
+            y = y0 + ((c // 3) % 3 - 1) * step
+            z = z0 + (c // 9 - 1) * step
+            if x < 0 or y < 0 or z < 0 or x >= root or y >= root or z >= root:
+                continue
+            key = morton_key(x, y, z)
+            if first <= key < end:
+                out[i] = True
+                break
+    return out
+
+
+@nb.njit(cache=True)
+def _faces_over_rows(projected, faces, bits, table, row_lo, n_a, n_b):
+    """Mask (F,) of the triangles whose projection's bounding box (projected: the snapped
+    vertices' row coordinates (p2, p3), (V, 2)) holds a row marked in the summed-area table
+    (n_a + 1, n_b + 1) of the rows from row_lo on."""
+    out = np.zeros(faces.shape[0], dtype=np.bool_)
+    for f in range(faces.shape[0]):
+        a0 = min(projected[faces[f, 0], 0], projected[faces[f, 1], 0], projected[faces[f, 2], 0])
+        a1 = max(projected[faces[f, 0], 0], projected[faces[f, 1], 0], projected[faces[f, 2], 0])
+        b0 = min(projected[faces[f, 0], 1], projected[faces[f, 1], 1], projected[faces[f, 2], 1])
+        b1 = max(projected[faces[f, 0], 1], projected[faces[f, 1], 1], projected[faces[f, 2], 1])
+        # Rows at integer (p2, p3) inside [a0, a1] x [b0, b1] / 2**bits, from row_lo on.
+        i0 = max(-((-a0) >> bits) - row_lo[0], 0)
+        i1 = min((a1 >> bits) - row_lo[0], n_a - 1)
+        j0 = max(-((-b0) >> bits) - row_lo[1], 0)
+        j1 = min((b1 >> bits) - row_lo[1], n_b - 1)
+        if i0 > i1 or j0 > j1:
+            continue
+        out[f] = table[i1 + 1, j1 + 1] - table[i0, j1 + 1] - table[i1 + 1, j0] + table[i0, j0] > 0
+    return out
+
+
+def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, direction: int, points: np.ndarray) -> np.ndarray:
+    """Ascending ids of the triangles that may cross the lattice rows of ``direction`` through
+    points (N, 3) int64 (their row coordinates' boxes hold one of those rows): with them,
+    rays.row_crossings gives those rows exactly, so winding numbers and cut points there."""
+    basis = row_basis(direction)
+    rows = points @ basis[1:].T
+    if rows.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    row_lo = rows.min(axis=0)
+    n_a, n_b = (rows.max(axis=0) - row_lo + 1).tolist()
+    marked = np.zeros((n_a, n_b), dtype=np.int64)
+    marked[rows[:, 0] - row_lo[0], rows[:, 1] - row_lo[1]] = 1
+    table = np.zeros((n_a + 1, n_b + 1), dtype=np.int64)
+    table[1:, 1:] = marked.cumsum(axis=0).cumsum(axis=1)
+    projected = np.ascontiguousarray(snapped @ basis[1:].T)
+    return np.flatnonzero(_faces_over_rows(projected, faces, bits, table, row_lo, n_a, n_b))
+
+
+@dataclass(frozen=True)
+class BandPiece:
+    """The band's part in a range [first, end) of finest-cell Morton keys (band_in_range),
+    everything named by lattice coordinates so that pieces merge without a shared numbering.
+
+    surface_keys, cut_keys, band_keys: sorted keys of the range's cells that meet the surface,
+    that are cut cells, that are in the band.  coords (P, 3) int64: the cut cells' corners;
+    inside (P,) bool; targets (P,) int64: the edge each warps onto, or -1.  Edges (E,): the
+    mixed edges of the tets of the cut cells found around the range whose ends are all
+    corners of the range's cut cells, and the edges its corners warp onto: edge_starts,
+    edge_ends (E, 3) lattice coordinates (the lexicographically smaller end first, as
+    stuffing orients them), directions (E,) int8, fracs (E,), points (E, 3), faces (E,)
+    int32 (the surface triangle crossed, -1 at an unresolved midpoint)."""
+
+    surface_keys: np.ndarray
+    cut_keys: np.ndarray
+    band_keys: np.ndarray
+    coords: np.ndarray
+    inside: np.ndarray
+    targets: np.ndarray
+    edge_starts: np.ndarray
+    edge_ends: np.ndarray
+    directions: np.ndarray
+    fracs: np.ndarray
+    points: np.ndarray
+    faces: np.ndarray
+
+
+def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first: int, end: int) -> BandPiece:
+    """The band's part in the finest cells of Morton key in [first, end), from the triangles
+    near them alone: what finest_band finds there over the whole surface, bit for bit.
+
+    The cells within one cell of the range are enough: a cut cell's corners and edges, and
+    all the cut edges around a corner of a range cell (which decide its warp), lie in them.
+    Their triangles are those whose box meets the range grown by two cells (the margin of
+    surface_cells' test), and the classes of their corners come from the x rows through the
+    corners, crossed with the triangles over those rows only (faces_over_rows)."""
+    levels = frame.levels
+    bits = rays.snap_bits(frame)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    near = np.flatnonzero(_faces_near_interval(snapped, faces, bits, levels, 2, first, end))
+    met = surface_cells(frame, snapped, faces[near], bits, levels)
+    met = met[_cells_near_interval(met, levels, first, end)]
+    own = (met >= first) & (met < end)
+    corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
+    column = faces_over_rows(snapped, faces, bits, X_AXIS_DIRECTION, corners.coords)
+    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION, column)}
+    for d in range(EDGE_DIRECTIONS.shape[0]):
+        if d != X_AXIS_DIRECTION:
+            crossings[d] = rays.row_crossings(frame, snapped, faces, d, near)
+    corner_class = rays.winding_numbers(crossings[X_AXIS_DIRECTION], corners.coords) > 0
+    is_cut = mixed_rows(corners.corner_ids, corner_class)
+    cut_cells, kept = _restrict(corners, is_cut)
+    inside = corner_class[kept]
+    cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings,
+                     MeshReport(frame.h, frame.levels))
+    targets = warp_targets(cuts, cut_cells.coords, frame.h)  # right at the corners of the range's cells
+    around = _cells_around(cut_cells.coords, targets >= 0, MAX_LEVEL - levels)
+    cut_keys = met[own & is_cut]
+    band_keys = unique_level_keys(np.concatenate([cut_keys, around[(around >= first) & (around < end)]]), levels)
+    # The range's cut cells' corners, and the edges they hold or warp onto.
+    ours = np.zeros(cut_cells.coords.shape[0], dtype=bool)
+    ours[cut_cells.corner_ids[(own & is_cut)[is_cut]].ravel()] = True
+    edges = ours[cuts.starts] & ours[cuts.ends]
+    warped = ours & (targets >= 0)
+    edges[targets[warped]] = True
+    edge_ids = np.flatnonzero(edges)
+    new_edge = np.full(cuts.starts.shape[0], -1, dtype=np.int64)
+    new_edge[edge_ids] = np.arange(edge_ids.shape[0])
+    own_targets = np.where(targets[ours] >= 0, new_edge[np.maximum(targets[ours], 0)], -1)
+    assert cuts.faces is not None  # cut_edges records each cut point's triangle
+    return BandPiece(met[own], cut_keys, band_keys, cut_cells.coords[ours], inside[ours], own_targets,
+                     cut_cells.coords[cuts.starts[edge_ids]], cut_cells.coords[cuts.ends[edge_ids]],
+                     cuts.directions[edge_ids], cuts.fracs[edge_ids], cuts.points[edge_ids], cuts.faces[edge_ids])
+
+
+def _first_of_each(keys: np.ndarray, name: str, *agreeing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted distinct keys, the index of the first occurrence of each) of keys (N,); an
+    AssertionError if two occurrences of a key differ in a row of one of the arrays (N, ...)."""
+    distinct, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    for values in agreeing:
+        if not np.array_equal(values[first][inverse], values):
+            raise AssertionError(f"band pieces disagree on a shared {name}")
+    return distinct, first
+
+
+def merge_band_pieces(frame: FatFrame, pieces: list[BandPiece], report: MeshReport) -> FinestBand:
+    """The band of pieces that cover the key space, as finest_band lays it out over the whole
+    surface (the same arrays, in the same order): the pieces' cells joined, the corners and
+    cut edges numbered as there (the numbering reads only cells and classes), and each vertex's
+    class and warp and each edge's cut point taken from the pieces, which must agree where
+    they overlap (AssertionError).  Counts the unresolved cut points in the report."""
+    surface_keys = np.concatenate([p.surface_keys for p in pieces])
+    cut_keys = np.concatenate([p.cut_keys for p in pieces])
+    band_keys = np.concatenate([p.band_keys for p in pieces])
+    if not (is_ascending(surface_keys) and is_ascending(band_keys)):
+        raise ValueError("band pieces must be given in key order, over disjoint ranges")
+    corners = number_vertices(octant_lattice_anchors(surface_keys, frame),
+                              np.ones(surface_keys.shape[0], dtype=np.int64))
+    cut_cells, _ = _restrict(corners, sorted_lookup(cut_keys, surface_keys)[1])
+    coords = cut_cells.coords
+    # The pieces' vertices and edges, each once, by coordinates.
+    vertex_keys = pack_coords(np.concatenate([p.coords for p in pieces]))
+    inside_all = np.concatenate([p.inside for p in pieces])
+    edge_starts = pack_coords(np.concatenate([p.edge_starts for p in pieces]))
+    edge_ends = pack_coords(np.concatenate([p.edge_ends for p in pieces]))
+    offsets = np.cumsum([0] + [p.edge_starts.shape[0] for p in pieces])
+    target_all = np.concatenate([np.where(p.targets >= 0, p.targets + o, -1) for p, o in zip(pieces, offsets)])
+    has_target = target_all >= 0
+    target_pairs = np.full((target_all.shape[0], 2), -1, dtype=np.int64)
+    target_pairs[has_target] = np.stack([edge_starts, edge_ends], axis=1)[target_all[has_target]]
+    vertex_sorted, vertex_first = _first_of_each(vertex_keys, "vertex", inside_all, target_pairs)
+    at, found = sorted_lookup(vertex_sorted, pack_coords(coords))
+    if not found.all() or vertex_sorted.shape[0] != coords.shape[0]:
+        raise AssertionError(f"the pieces hold {vertex_sorted.shape[0]} band vertices, the cut cells "
+                             f"{coords.shape[0]}")
+    inside = inside_all[vertex_first[at]]
+    # Edges by their ends' ids in the merged numbering.
+    id_of = np.empty(coords.shape[0], dtype=np.int64)
+    id_of[at] = np.arange(coords.shape[0])
+    start_at, start_found = sorted_lookup(vertex_sorted, edge_starts)
+    end_at, end_found = sorted_lookup(vertex_sorted, edge_ends)
+    if not (start_found.all() and end_found.all()):
+        raise AssertionError("a cut edge of a band piece ends off the band's vertices")
+    n = coords.shape[0]
+    edge_keys = id_of[start_at] * n + id_of[end_at]
+    directions = np.concatenate([p.directions for p in pieces])
+    fracs = np.concatenate([p.fracs for p in pieces])
+    points = np.concatenate([p.points for p in pieces])
+    faces = np.concatenate([p.faces for p in pieces])
+    edge_sorted, edge_first = _first_of_each(edge_keys, "cut edge", directions, fracs.view(np.int64),
+                                             points.view(np.int64), faces)
+    starts, ends, dirs, *table = collect_cut_edges(graded_tets(cut_cells), inside, coords)
+    e_at, e_found = sorted_lookup(edge_sorted, starts.astype(np.int64) * n + ends)
+    if not e_found.all() or edge_sorted.shape[0] != starts.shape[0]:
+        raise AssertionError(f"the pieces hold {edge_sorted.shape[0]} cut edges, the cut cells {starts.shape[0]}")
+    take = edge_first[e_at]
+    if not np.array_equal(directions[take], dirs):
+        raise AssertionError("band pieces give a cut edge another direction")
+    crossed = faces[take]
+    cuts = CutEdges(starts, ends, dirs, fracs[take], points[take], tuple(table), crossed)
+    report.unresolved_cuts += int(np.count_nonzero(crossed < 0))
+    # Each vertex's warp: its piece's target edge, found among the merged edges.
+    order = np.empty(edge_sorted.shape[0], dtype=np.int64)
+    order[e_at] = np.arange(starts.shape[0])
+    warp_at = vertex_first[at]
+    targets = np.full(n, -1, dtype=np.int64)
+    warped = has_target[warp_at]
+    t = target_all[warp_at[warped]]
+    targets[warped] = order[sorted_lookup(edge_sorted, id_of[start_at[t]] * n + id_of[end_at[t]])[0]]
+    return FinestBand(surface_keys, band_keys, BandStuffing(coords, inside, cuts, targets))
+
+
+def band_bounds(frame: FatFrame, snapped: np.ndarray, n_parts: int) -> np.ndarray:
+    """Boundaries (n_parts + 1,) int64 of n_parts ranges of finest-cell Morton keys covering
+    the key space, with about as many surface vertices in each (range r: keys bounds[r] ..
+    bounds[r + 1] - 1)."""
+    cells = (snapped >> rays.snap_bits(frame)).clip(0, (1 << frame.levels) - 1) << (MAX_LEVEL - frame.levels)
+    keys = np.sort(morton_keys(cells))
+    bounds = np.empty(n_parts + 1, dtype=np.int64)
+    bounds[0], bounds[-1] = 0, np.int64(1) << (3 * MAX_LEVEL)
+    if keys.shape[0]:
+        bounds[1:-1] = keys[(np.arange(1, n_parts) * keys.shape[0]) // n_parts]
+    else:
+        bounds[1:-1] = 0
+    return bounds
+
+
+def finest_band_in_ranges(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, n_parts: int,
+                          report: MeshReport) -> FinestBand:
+    """finest_band computed in n_parts ranges of the key space (band_bounds), each from the
+    triangles near it (band_in_range), and merged (merge_band_pieces): the same band."""
+    bounds = band_bounds(frame, snapped, n_parts)
+    pieces = [band_in_range(frame, snapped, faces, int(bounds[r]), int(bounds[r + 1])) for r in range(n_parts)]
+    return merge_band_pieces(frame, pieces, report)
+
+
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
                    divisions: float | None = None, max_size: float | None = None) -> MeshResult:
-    """One meshing pass at ``size`` (graded up to max_size, as mesh()), its leaves meshed in
-    n_parts Morton ranges (mesh_range) and merged (merge_ranges), then finished as one mesh
-    (pinch repair, quality, compaction).
+    """One meshing pass at ``size`` (graded up to max_size, as mesh()), its band computed in
+    n_parts ranges of the key space (finest_band_in_ranges), its leaves meshed in n_parts
+    Morton ranges (mesh_range) and merged (merge_ranges), then finished as one mesh (pinch
+    repair, quality, compaction).
 
     The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``
     where that pass needs no mending (its tets inside [10.7, 164.8] degrees at once, as on
@@ -272,7 +564,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     _check_memory(surface, field, _available_memory())
     report = _pass_report(surface, field, h, {})
     stages = _Stages(report, None)
-    frame, _, _, _, keys, levels, band = pass_leaves(surface, field, report, stages)
+    frame, _, _, _, keys, levels, band = pass_leaves(
+        surface, field, report, stages,
+        lambda frame, snapped, faces, _, report: finest_band_in_ranges(frame, snapped, faces, n_parts, report))
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds, index = leaf_ranges(keys.shape[0], n_parts), BandIndex.build(band)
@@ -293,5 +587,6 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     return result
 
 
-__all__ = ["BandIndex", "RangeMesh", "leaf_ranges", "merge_ranges", "mesh_in_ranges", "mesh_range", "pack_coords",
-           "touching_leaves"]
+__all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_bounds", "band_in_range", "faces_over_rows",
+           "finest_band_in_ranges", "leaf_ranges", "merge_band_pieces", "merge_ranges", "mesh_in_ranges", "mesh_range",
+           "pack_coords", "touching_leaves"]
