@@ -75,29 +75,37 @@ def test_ranges_merge_into_the_one_process_mesh(name, divisions, uniform):
 
 
 def test_ranges_cut_through_transition_leaves_and_share_points():
-    """The ranges meet across leaves of different sizes (templates on both sides), and the
-    pieces share lattice vertices and cut points, placed alike (merge_ranges checks)."""
-    from paroct.frame import fat_frame
-    from paroct.mesher import MeshReport, checked_x_rows, graded_leaves
-    from paroct.partition import BandIndex
+    """The ranges meet across leaves of different sizes (templates on both sides), read only
+    the band pieces near them, and share lattice vertices and cut points, placed alike
+    (merge_ranges checks)."""
+    from paroct.mesher import X_AXIS_DIRECTION, octree_around_band
+    from paroct.partition import BandIndex, band_bounds, band_in_range, band_pieces_for
     from paroct.sizing import size_field
 
     surface = paroct.load_surface(DATA / "bunny.stl")
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 20
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, size)
-    snapped, faces, crossings = checked_x_rows(surface, frame)
-    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, size_field(size),
-                                       MeshReport(size=size, levels=frame.levels))
+    frame, snapped, faces, crossings = _pass_surface(surface, size)
+    band_at = band_bounds(frame, snapped, 6)
+    band = [band_in_range(frame, snapped, faces, int(band_at[r]), int(band_at[r + 1])) for r in range(6)]
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, size_field(size),
+                                      np.concatenate([p.surface_keys for p in band]),
+                                      np.concatenate([p.band_keys for p in band]))
     bounds = leaf_ranges(keys.shape[0], 4)
-    index = BandIndex.build(band)
-    pieces = [mesh_range(frame, keys, levels, index, int(bounds[r]), int(bounds[r + 1])) for r in range(4)]
+    pieces, read_counts = [], []
+    for r in range(4):
+        first, end = int(bounds[r]), int(bounds[r + 1])
+        rows = np.concatenate([np.arange(first, end), touching_leaves(keys, levels, first, end)])
+        read = band_pieces_for(keys, levels, rows, frame.levels, band_at)
+        read_counts.append(read.shape[0])
+        pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end))
+    assert min(read_counts) < 6  # a range reads the band near it, not all of it
     mixed = 0
     for r in range(1, 4):
         around = touching_leaves(keys, levels, int(bounds[r]), int(bounds[r + 1]))
         mixed += len(set(levels[around].tolist()) | set(levels[bounds[r]:bounds[r + 1]].tolist())) > 1
     assert mixed > 0
     shared_vertices = np.intersect1d(pieces[0].vertex_keys, pieces[1].vertex_keys)
-    shared_cuts = np.intersect1d(pieces[0].cut_ids, pieces[1].cut_ids)
+    shared_cuts = np.intersect1d(pieces[0].cut_keys, pieces[1].cut_keys)
     assert shared_vertices.size > 0 and shared_cuts.size > 0
     assert sum(p.tets.shape[0] for p in pieces) > 0
 
@@ -155,6 +163,23 @@ def test_faces_near_an_interval_match_a_search_of_every_cell(seed):
         for margin in (0, 2):
             got = np.flatnonzero(_faces_near_interval(snapped, faces, bits, levels, margin, first, end))
             assert got.tolist() == naive.faces_near_interval(snapped, faces, bits, levels, margin, first, end)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_box_of_an_interval_is_the_box_of_its_cells(seed):
+    from paroct.partition import _interval_box
+
+    levels = 3
+    rng = np.random.default_rng(5000 + seed)
+    shift = ML - levels
+    for first, end in [_random_interval(rng, levels) for _ in range(6)] + [(0, 1 << (3 * ML))]:
+        cells = np.array([(x, y, z) for x in range(8) for y in range(8) for z in range(8)
+                          if first <= naive.morton_key(x << shift, y << shift, z << shift) < end]).reshape(-1, 3)
+        lo, hi = _interval_box(first, end, levels)
+        if cells.size:
+            assert lo.tolist() == cells.min(axis=0).tolist() and hi.tolist() == cells.max(axis=0).tolist()
+        else:
+            assert np.any(hi < lo)
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -797,6 +797,16 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     return result, lost, advice, walls
 
 
+def pass_frame(h: float, surface: Surface, report: MeshReport) -> FatFrame:
+    """The frame of a pass at size h around the surface (ParoctError if deeper than
+    MAX_FRAME_LEVELS); sets report.levels."""
+    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
+    if frame.levels > MAX_FRAME_LEVELS:
+        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
+    report.levels = frame.levels
+    return frame
+
+
 class PassLeaves(NamedTuple):
     """The octree of a pass with its band on one level (pass_leaves): the frame, the surface in
     it (snapped vertices, faces, {X_AXIS_DIRECTION: x-row crossings}) and graded_leaves' sorted
@@ -811,22 +821,13 @@ class PassLeaves(NamedTuple):
     band: BandStuffing
 
 
-def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: _Stages,
-                band_of: Callable[[FatFrame, np.ndarray, np.ndarray, dict, MeshReport], FinestBand] | None = None
-                ) -> PassLeaves:
-    """The frame at field.size (ParoctError if deeper than MAX_FRAME_LEVELS), the surface's x
-    rows and the leaves of a pass whose band is one level (graded_leaves); fills the report's
-    levels, leaves and leaf levels.  band_of(frame, snapped, faces, crossings, report) gives
-    the band (default finest_band; partition.finest_band_in_ranges computes it in ranges)."""
-    h = field.size
-    frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
-    if frame.levels > MAX_FRAME_LEVELS:
-        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
-    report.levels = frame.levels
+def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: _Stages) -> PassLeaves:
+    """The frame at field.size (pass_frame), the surface's x rows and the leaves of a pass whose
+    band is one level (graded_leaves); fills the report's levels, leaves and leaf levels."""
+    frame = pass_frame(field.size, surface, report)
     stages.done("frame")
     snapped, faces, crossings = checked_x_rows(surface, frame)
-    finest = None if band_of is None else band_of(frame, snapped, faces, crossings, report)
-    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report, finest)
+    keys, levels, band = graded_leaves(frame, snapped, faces, crossings, surface, field, report)
     report.n_leaves = int(keys.shape[0])
     report.leaf_levels = _leaf_levels(frame, levels)
     stages.done("octree")
@@ -1352,24 +1353,33 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
     it, outside leaves are dropped, and inside leaves emit fat tets or transition templates.
     The size field decides the rest, up to max_size.
     """
-    finest = frame.levels
-    x_crossings = crossings[X_AXIS_DIRECTION]
     if band is None:
         band = finest_band(frame, snapped, faces, crossings, report)
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys, band.keys)
+    return keys, levels, band.stuffing
+
+
+def octree_around_band(frame: FatFrame, x_crossings: rays.RowCrossings, surface: Surface, field: SizeField,
+                       surface_keys: np.ndarray, band_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """graded_leaves' octree around a band: the band's cells (band_keys, sorted, finest level)
+    and the size field's seeds (pruned where no cell meeting the surface, surface_keys, lies),
+    balanced, with the leaves outside the solid dropped: sorted (keys (N,) int64, levels (N,)
+    int8)."""
+    finest = frame.levels
     seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
-                       prune=surface_prune(frame, band.surface_keys, x_crossings))
+                       prune=surface_prune(frame, surface_keys, x_crossings))
     seed_keys, seed_levels, _ = seeds
     if np.all(seed_levels == finest):  # a uniform lattice: already balanced, nothing to complete
-        keys = sorted_unique(np.concatenate([band.keys, seed_keys]))
+        keys = sorted_unique(np.concatenate([band_keys, seed_keys]))
         levels = np.full(keys.shape[0], finest, dtype=np.int8)
     else:
-        keys, levels = balance(np.concatenate([band.keys, seed_keys]),
-                               np.concatenate([np.full(band.keys.shape[0], finest, dtype=np.int8), seed_levels]))
+        keys, levels = balance(np.concatenate([band_keys, seed_keys]),
+                               np.concatenate([np.full(band_keys.shape[0], finest, dtype=np.int8), seed_levels]))
     in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
-    in_band[fine] = sorted_lookup(band.keys, keys[fine])[1]
+    in_band[fine] = sorted_lookup(band_keys, keys[fine])[1]
     keep = kept_leaves(frame, keys, levels, in_band, seeds, x_crossings)
-    return np.compress(keep, keys), np.compress(keep, levels), band.stuffing
+    return np.compress(keep, keys), np.compress(keep, levels)
 
 
 @nb.njit(cache=True, parallel=True)

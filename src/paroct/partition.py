@@ -18,6 +18,7 @@ tie stuffing breaks is broken by lattice coordinates, not by vertex ids (session
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numba as nb
 import numpy as np
@@ -27,15 +28,18 @@ from .errors import ParoctError
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
-                     _cells_around, _check_memory, _finish, _losses, _pass_report, _refuse_losing_too_much, _restrict,
-                     _Stages, cut_edges, pass_leaves, resolve_size, vertex_classes)
+                     _cells_around, _check_memory, _finish, _leaf_levels, _losses, _pass_report,
+                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, checked_x_rows, cut_edges, octree_around_band,
+                     pass_frame, resolve_size, vertex_classes)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
-from .octree import octant_lattice_anchors, surface_cells, unique_level_keys
+from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
 from .sizing import size_field
 from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
+#: No lattice points: (0, 3) int64, what joins of no pieces start from.
+_NO_COORDS = np.zeros((0, 3), dtype=np.int64)
 #: Bits per axis of a packed lattice coordinate (pack_coords): lattice coordinates of a frame
 #: reach 2**MAX_LEVEL.
 _COORD_BITS = 21
@@ -103,160 +107,33 @@ def pack_coords(coords: np.ndarray) -> np.ndarray:
     return coords[:, 0] | (coords[:, 1] << _COORD_BITS) | (coords[:, 2] << (2 * _COORD_BITS))
 
 
-@dataclass(frozen=True)
-class BandIndex:
-    """The band (graded_leaves' BandStuffing) with its vertices and cut edges sorted once, so
-    that a range finds its part by binary searches, in time of its own size.  vertex_keys:
-    pack_coords of the band vertices, ascending, vertex_ids: the band id of each; edge_keys:
-    start * P + end of the cut edges (band ids), ascending, edge_ids: the edge of each."""
-
-    band: BandStuffing
-    vertex_keys: np.ndarray
-    vertex_ids: np.ndarray
-    edge_keys: np.ndarray
-    edge_ids: np.ndarray
-
-    @classmethod
-    def build(cls, band: BandStuffing) -> BandIndex:
-        packed = pack_coords(band.coords)
-        vertex_ids = np.argsort(packed)
-        edges = band.cuts.starts.astype(np.int64) * band.coords.shape[0] + band.cuts.ends
-        edge_ids = np.argsort(edges)
-        return cls(band, packed[vertex_ids], vertex_ids, edges[edge_ids], edge_ids)
-
-    def vertices_at(self, coords: np.ndarray) -> np.ndarray:
-        """Band ids (ascending, distinct) of the band vertices among coords (K, 3)."""
-        at, found = sorted_lookup(self.vertex_keys, pack_coords(coords))
-        return np.unique(self.vertex_ids[at[found]])
-
-    def edges(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """The cut edge of each (start, end) pair of band ids; AssertionError if one is none."""
-        at, found = sorted_lookup(self.edge_keys, starts.astype(np.int64) * self.band.coords.shape[0] + ends)
-        if not found.all():
-            raise AssertionError(f"{int((~found).sum())} mixed edges of a range are not cut edges of the band")
-        return self.edge_ids[at]
+def edge_keys(starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The key (E,) int64 of each lattice edge from starts to ends (E, 3): pack_coords of the
+    sum of its ends, twice its midpoint, the same whatever numbers the vertices (distinct for
+    the edges of a conforming complex, and below 2**21 an axis in a frame of at most
+    MAX_LEVEL - 1 levels)."""
+    return pack_coords(np.asarray(starts, dtype=np.int64) + np.asarray(ends, dtype=np.int64))
 
 
-@dataclass(frozen=True)
-class RangeMesh:
-    """One range's stuffed tets, its own leaves' only, and the points they use.  points
-    (V + E, 3) float64: lattice vertices where the warps put them, then cut points; tets
-    (M, 4) int32 into points; vertex_keys (V,) int64: pack_coords of each lattice vertex;
-    inside (V,) bool; targets (V,) int64: the band cut edge (an index into the band's
-    CutEdges) each vertex warps onto, or -1; cut_ids (E,) int64: the band cut edge of each
-    cut point."""
-
-    points: np.ndarray
-    tets: np.ndarray
-    vertex_keys: np.ndarray
-    inside: np.ndarray
-    targets: np.ndarray
-    cut_ids: np.ndarray
-
-
-def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int,
-               end: int) -> RangeMesh:
-    """Number, classify, emit and stuff the leaves keys[first:end] of graded_leaves' octree
-    (keys, levels; band: its band, indexed), from them, the leaves touching them and the band.
-
-    Vertices are numbered over the range and its touching leaves, the band's vertices among
-    their corners first (number_vertices' prefix, in band order), so that split points,
-    classes and the quad rule's corner-before-centre order come out as over the whole octree;
-    only the range's own tets are emitted and stuffed.  Its cut edges are the band's that its
-    tets hold, plus those its vertices warp onto in touching cells."""
-    around = touching_leaves(keys, levels, first, end)
-    before = int(np.searchsorted(around, first))
-    rows = np.concatenate([around[:before], np.arange(first, end, dtype=np.int64), around[before:]])
-    own = np.arange(before, before + end - first)
-    anchors = octant_lattice_anchors(keys[rows], frame)
-    sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
-    corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
-    in_range = band.vertices_at(corners)  # local vertex i < len(in_range) is band vertex in_range[i]
-    vertices = number_vertices(anchors, sides, prefix=band.band.coords[in_range], eager=False)
-    inside = vertex_classes(vertices, band.band.inside[in_range])
-    own_vertices = LeafVertices(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids,
-                                vertices.coords, vertices.first_centre)
-    tets = graded_tets(own_vertices, inside)
-    cuts, cut_ids, targets = _range_cuts(band, in_range, vertices.coords, tets, inside)
-    points, out_tets, _ = stuff(frame.to_space(vertices.coords), vertices.coords, tets, inside, cuts, targets,
-                                first_centre=vertices.first_centre)
-    # Only the points the range's tets use: vertices of touching leaves alone may lack the
-    # edge they warp onto here, and their own range places them.
-    n = vertices.coords.shape[0]
-    used = np.zeros(points.shape[0], dtype=bool)
-    used[out_tets.ravel()] = True
-    new_id = np.cumsum(used) - 1
-    lattice = np.flatnonzero(used[:n])
-    global_targets = np.full(n, -1, dtype=np.int64)
-    warped = targets >= 0
-    global_targets[warped] = cut_ids[targets[warped]]
-    return RangeMesh(points[used], new_id[out_tets].astype(np.int32), pack_coords(vertices.coords[lattice]),
-                     inside[lattice], global_targets[lattice], cut_ids[used[n:]])
-
-
-def _range_cuts(band: BandIndex, in_range: np.ndarray, coords: np.ndarray, tets: np.ndarray,
-                inside: np.ndarray) -> tuple[CutEdges, np.ndarray, np.ndarray]:
-    """The range's CutEdges (its tets' mixed edges, then the band edges its band vertices warp
-    onto that its tets lack, where both ends are its vertices), the band edge (E,) of each,
-    and the targets (V,) into them.  Local vertex i < len(in_range) is band vertex
-    in_range[i] (ascending)."""
-    band_cuts = band.band.cuts
-    starts, ends, directions, head, upper, chain = collect_cut_edges(tets, inside, coords)
-    cut_ids = band.edges(in_range[starts], in_range[ends])  # mixed edges join band vertices
-    wanted = band.band.targets[in_range]
-    sorted_ids = np.argsort(cut_ids)
-    at, held = sorted_lookup(cut_ids[sorted_ids], wanted)
-    extra = np.unique(wanted[(wanted >= 0) & ~held])
-    start_at, start_found = sorted_lookup(in_range, band_cuts.starts[extra])
-    end_at, end_found = sorted_lookup(in_range, band_cuts.ends[extra])
-    both = start_found & end_found
-    extra, extra_starts, extra_ends = extra[both], start_at[both].astype(starts.dtype), end_at[both].astype(ends.dtype)
-    # Extra edges are in no tet: the lookup table (head, upper, chain) never reaches them.
-    table = (head, np.concatenate([upper, np.maximum(extra_starts, extra_ends).astype(upper.dtype)]),
-             np.concatenate([chain, np.full(extra.shape[0], -1, dtype=chain.dtype)]))
-    all_ids = np.concatenate([cut_ids, extra])
-    faces = None if band_cuts.faces is None else band_cuts.faces[all_ids]
-    cuts = CutEdges(np.concatenate([starts, extra_starts]), np.concatenate([ends, extra_ends]),
-                    np.concatenate([directions, band_cuts.directions[extra].astype(directions.dtype)]),
-                    band_cuts.fracs[all_ids], band_cuts.points[all_ids], table, faces)
-    extra_at, extra_held = sorted_lookup(extra, wanted)
-    targets = np.full(coords.shape[0], -1, dtype=np.int64)
-    held_ids = sorted_ids[at] if sorted_ids.size else at
-    targets[: in_range.shape[0]] = np.where(held, held_ids, np.where(extra_held, cut_ids.shape[0] + extra_at, -1))
-    return cuts, all_ids, targets
-
-
-def merge_ranges(pieces: list[RangeMesh], n_cuts: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The pieces as one stuffed mesh, each lattice vertex once (by its coordinates), then the
-    band's n_cuts cut points in band order, as one pass over the whole octree lays them out:
-    (points (L + n_cuts, 3), tets (M, 4) int32, inside (L,), targets (L,) into the band's cut
-    edges).  A vertex or cut point the pieces place differently is an
-    AssertionError: stuffing in ranges must agree where they meet."""
-    all_keys = np.concatenate([p.vertex_keys for p in pieces])
-    _, first, vertex_of = np.unique(all_keys, return_index=True, return_inverse=True)
-    n_vertices = first.shape[0]
-    points = np.empty((n_vertices + n_cuts, 3))
-    placed = np.zeros(n_cuts, dtype=bool)
-    inside = np.concatenate([p.inside for p in pieces])[first]
-    targets = np.concatenate([p.targets for p in pieces])[first]
-    lattice = np.concatenate([p.points[: p.vertex_keys.shape[0]] for p in pieces])
-    points[:n_vertices] = lattice[first]
-    if not np.array_equal(lattice, points[vertex_of]):
-        raise AssertionError("ranges place a shared lattice vertex differently")
-    tets, start = [], 0
-    for p in pieces:
-        n = p.vertex_keys.shape[0]
-        new_id = np.concatenate([vertex_of[start:start + n], n_vertices + p.cut_ids])
-        cut_points = p.points[n:]
-        seen = placed[p.cut_ids]
-        if not np.array_equal(points[n_vertices + p.cut_ids[seen]], cut_points[seen]):
-            raise AssertionError("ranges place a shared cut point differently")
-        points[n_vertices + p.cut_ids] = cut_points
-        placed[p.cut_ids] = True
-        tets.append(new_id[p.tets].astype(np.int32))
-        start += n
-    points[n_vertices:][~placed] = np.nan  # cut points no range uses: no tet refers to them
-    return points, np.concatenate(tets) if tets else np.zeros((0, 4), dtype=np.int32), inside, targets
+@nb.njit(cache=True)
+def _interval_box(first, end, levels):
+    """Bounding box (lo (3,), hi (3,) int64, finest-cell coordinates, inclusive) of the finest
+    cells of Morton key in [first, end) of a frame of ``levels`` levels, from the coarsest
+    octants tiling the interval (hi < lo if it is empty)."""
+    lo = np.full(3, np.int64(1) << MAX_LEVEL, dtype=np.int64)
+    hi = np.full(3, np.int64(-1), dtype=np.int64)
+    shift = MAX_LEVEL - levels
+    at = np.int64(first)
+    while at < end:
+        lev = _largest_fitting(at, end)
+        x, y, z = morton_coords(at)
+        side = np.int64(1) << (MAX_LEVEL - lev)
+        lo[0], lo[1], lo[2] = min(lo[0], x >> shift), min(lo[1], y >> shift), min(lo[2], z >> shift)
+        hi[0] = max(hi[0], ((x + side) >> shift) - 1)
+        hi[1] = max(hi[1], ((y + side) >> shift) - 1)
+        hi[2] = max(hi[2], ((z + side) >> shift) - 1)
+        at += np.int64(1) << (3 * (MAX_LEVEL - lev))
+    return lo, hi
 
 
 @nb.njit(cache=True)
@@ -267,6 +144,7 @@ def _faces_near_interval(snapped, faces, bits, levels, margin, first, end):
     out = np.zeros(faces.shape[0], dtype=np.bool_)
     shift = MAX_LEVEL - levels
     top = (np.int64(1) << levels) - 1
+    box_lo, box_hi = _interval_box(first, end, levels)
     stack_x = np.empty(8 * levels + 8, dtype=np.int64)
     stack_y = np.empty_like(stack_x)
     stack_z = np.empty_like(stack_x)
@@ -281,6 +159,9 @@ def _faces_near_interval(snapped, faces, bits, levels, margin, first, end):
             hi[k] = min((b >> bits) + margin, top)
         if lo[0] > hi[0] or lo[1] > hi[1] or lo[2] > hi[2]:
             continue
+        if lo[0] > box_hi[0] or lo[1] > box_hi[1] or lo[2] > box_hi[2] or \
+                hi[0] < box_lo[0] or hi[1] < box_lo[1] or hi[2] < box_lo[2]:
+            continue  # far from every cell of the interval: no descent
         n = 1
         stack_x[0], stack_y[0], stack_z[0], stack_side[0] = 0, 0, 0, top + 1
         while n > 0 and not out[f]:
@@ -354,16 +235,16 @@ def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, direction
     points (N, 3) int64 (their row coordinates' boxes hold one of those rows): with them,
     rays.row_crossings gives those rows exactly, so winding numbers and cut points there."""
     basis = row_basis(direction)
-    rows = points @ basis[1:].T
-    if rows.shape[0] == 0:
+    if points.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
+    rows = rays.in_row_coordinates(np.ascontiguousarray(points, dtype=np.int64), basis)[:, 1:]
     row_lo = rows.min(axis=0)
     n_a, n_b = (rows.max(axis=0) - row_lo + 1).tolist()
     marked = np.zeros((n_a, n_b), dtype=np.int64)
     marked[rows[:, 0] - row_lo[0], rows[:, 1] - row_lo[1]] = 1
     table = np.zeros((n_a + 1, n_b + 1), dtype=np.int64)
     table[1:, 1:] = marked.cumsum(axis=0).cumsum(axis=1)
-    projected = np.ascontiguousarray(snapped @ basis[1:].T)
+    projected = np.ascontiguousarray(rays.in_row_coordinates(snapped, basis)[:, 1:])
     return np.flatnonzero(_faces_over_rows(projected, faces, bits, table, row_lo, n_a, n_b))
 
 
@@ -407,21 +288,31 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
     levels = frame.levels
     bits = rays.snap_bits(frame)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    near = np.flatnonzero(_faces_near_interval(snapped, faces, bits, levels, 2, first, end))
+    near = _faces_near_interval(snapped, faces, bits, levels, 2, first, end)
     met = surface_cells(frame, snapped, faces[near], bits, levels)
     met = met[_cells_near_interval(met, levels, first, end)]
     own = (met >= first) & (met < end)
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
-    column = faces_over_rows(snapped, faces, bits, X_AXIS_DIRECTION, corners.coords)
-    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION, column)}
+    column = np.zeros(faces.shape[0], dtype=bool)
+    column[faces_over_rows(snapped, faces, bits, X_AXIS_DIRECTION, corners.coords)] = True
+    # The triangles read, as a surface of their own (crossings in time of its size): its
+    # triangle i is triangle read[i] of the whole, ascending, so ties break as there.
+    read = np.flatnonzero(near | column)
+    local_faces = faces[read]
+    used = np.zeros(snapped.shape[0], dtype=bool)
+    used[local_faces.ravel()] = True
+    local_snapped = np.ascontiguousarray(snapped[used])
+    local_faces = (np.cumsum(used) - 1)[local_faces]
+    crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, local_snapped, local_faces, X_AXIS_DIRECTION,
+                                                      np.flatnonzero(column[read]))}
     for d in range(EDGE_DIRECTIONS.shape[0]):
         if d != X_AXIS_DIRECTION:
-            crossings[d] = rays.row_crossings(frame, snapped, faces, d, near)
+            crossings[d] = rays.row_crossings(frame, local_snapped, local_faces, d, np.flatnonzero(near[read]))
     corner_class = rays.winding_numbers(crossings[X_AXIS_DIRECTION], corners.coords) > 0
     is_cut = mixed_rows(corners.corner_ids, corner_class)
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
-    cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings,
+    cuts = cut_edges(frame, local_snapped, local_faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings,
                      MeshReport(frame.h, frame.levels))
     targets = warp_targets(cuts, cut_cells.coords, frame.h)  # right at the corners of the range's cells
     around = _cells_around(cut_cells.coords, targets >= 0, MAX_LEVEL - levels)
@@ -438,9 +329,11 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
     new_edge[edge_ids] = np.arange(edge_ids.shape[0])
     own_targets = np.where(targets[ours] >= 0, new_edge[np.maximum(targets[ours], 0)], -1)
     assert cuts.faces is not None  # cut_edges records each cut point's triangle
+    crossed = cuts.faces[edge_ids]
+    crossed = np.where(crossed >= 0, read[np.maximum(crossed, 0)] if read.size else -1, -1).astype(np.int32)
     return BandPiece(met[own], cut_keys, band_keys, cut_cells.coords[ours], inside[ours], own_targets,
                      cut_cells.coords[cuts.starts[edge_ids]], cut_cells.coords[cuts.ends[edge_ids]],
-                     cuts.directions[edge_ids], cuts.fracs[edge_ids], cuts.points[edge_ids], cuts.faces[edge_ids])
+                     cuts.directions[edge_ids], cuts.fracs[edge_ids], cuts.points[edge_ids], crossed)
 
 
 def _first_of_each(keys: np.ndarray, name: str, *agreeing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -544,12 +437,226 @@ def finest_band_in_ranges(frame: FatFrame, snapped: np.ndarray, faces: np.ndarra
     return merge_band_pieces(frame, pieces, report)
 
 
+@dataclass(frozen=True)
+class BandIndex:
+    """Band pieces (band_in_range) as one table by lattice coordinates, so that a range finds
+    its band vertices and cut edges by binary searches, with no numbering shared with other
+    ranges.  coords (P, 3): the band vertices, by ascending vertex_keys (P,) (pack_coords);
+    inside (P,); target_keys (P,): edge_keys of the edge each warps onto, or -1.  Cut edges
+    by ascending keys (E,) (edge_keys): starts, ends (E, 3), directions, fracs, points (E, 3),
+    faces.  Pieces that disagree on a vertex or an edge they share are an AssertionError."""
+
+    vertex_keys: np.ndarray
+    coords: np.ndarray
+    inside: np.ndarray
+    target_keys: np.ndarray
+    keys: np.ndarray
+    starts: np.ndarray
+    ends: np.ndarray
+    directions: np.ndarray
+    fracs: np.ndarray
+    points: np.ndarray
+    faces: np.ndarray
+
+    @classmethod
+    def from_pieces(cls, pieces: Sequence[BandPiece]) -> BandIndex:
+        def joined(name: str, empty: np.ndarray) -> np.ndarray:
+            return np.concatenate([empty] + [getattr(p, name) for p in pieces])
+
+        starts, ends = joined("edge_starts", _NO_COORDS), joined("edge_ends", _NO_COORDS)
+        keys = edge_keys(starts, ends)
+        directions, fracs = joined("directions", np.zeros(0, np.int8)), joined("fracs", np.zeros(0))
+        points, faces = joined("points", np.zeros((0, 3))), joined("faces", np.zeros(0, np.int32))
+        keys_sorted, e = _first_of_each(keys, "cut edge", directions, fracs.view(np.int64), points.view(np.int64),
+                                        faces)
+        offsets = np.cumsum([0] + [p.edge_starts.shape[0] for p in pieces])
+        targets = joined("targets", np.zeros(0, np.int64))
+        targets += np.repeat(offsets[:-1], [p.targets.shape[0] for p in pieces]) * (targets >= 0)
+        target_keys = np.full(targets.shape[0], -1, dtype=np.int64)
+        target_keys[targets >= 0] = keys[targets[targets >= 0]]
+        coords, inside = joined("coords", _NO_COORDS), joined("inside", np.zeros(0, bool))
+        vertex_sorted, v = _first_of_each(pack_coords(coords), "vertex", inside, target_keys)
+        return cls(vertex_sorted, coords[v], inside[v], target_keys[v], keys_sorted, starts[e], ends[e], directions[e],
+                   fracs[e], points[e], faces[e])
+
+    def vertices_at(self, coords: np.ndarray) -> np.ndarray:
+        """Indices (ascending, distinct) of the band vertices among coords (K, 3)."""
+        at, found = sorted_lookup(self.vertex_keys, pack_coords(coords))
+        return np.unique(at[found])
+
+    def edges_at(self, keys: np.ndarray) -> np.ndarray:
+        """The index of the cut edge of each key (K,); AssertionError if one is none."""
+        at, found = sorted_lookup(self.keys, keys)
+        if not found.all():
+            raise AssertionError(f"{int((~found).sum())} mixed edges of a range are not cut edges of its band pieces")
+        return at
+
+
+@dataclass(frozen=True)
+class RangeMesh:
+    """One range's stuffed tets, its own leaves' only, and the points they use.  points
+    (V + E, 3) float64: lattice vertices where the warps put them, then cut points; tets
+    (M, 4) int32 into points; vertex_keys (V,) int64: pack_coords of each lattice vertex;
+    inside (V,) bool; target_keys (V,) int64: edge_keys of the cut edge each vertex warps
+    onto, or -1, and target_faces (V,) int32 the surface triangle there (-1 if none);
+    cut_keys (E,) int64: edge_keys of the edge of each cut point, and cut_faces (E,) int32
+    its triangle."""
+
+    points: np.ndarray
+    tets: np.ndarray
+    vertex_keys: np.ndarray
+    inside: np.ndarray
+    target_keys: np.ndarray
+    target_faces: np.ndarray
+    cut_keys: np.ndarray
+    cut_faces: np.ndarray
+
+
+def band_pieces_for(keys: np.ndarray, levels: np.ndarray, rows: np.ndarray, finest: int,
+                    bounds: np.ndarray) -> np.ndarray:
+    """Indices (ascending) of the band pieces of key ranges ``bounds`` (band_bounds) that a
+    range whose own and touching leaves are keys[rows] reads: those holding one of its finest
+    leaves.  Every cut cell with a corner on one of its own leaves is such a leaf (it touches
+    the leaf), so these pieces hold every band vertex its tets use, its class, its warp and
+    the edge it warps onto."""
+    fine = keys[rows][levels[rows] == finest]
+    return np.unique(np.searchsorted(bounds, fine, side="right") - 1)
+
+
+def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int,
+               end: int) -> RangeMesh:
+    """Number, classify, emit and stuff the leaves keys[first:end] of graded_leaves' octree
+    (keys, levels) from them, the leaves touching them and the band pieces they read (band:
+    indexed, BandIndex.from_pieces of band_pieces_for's pieces).
+
+    Vertices are numbered over the range and its touching leaves, the band's vertices among
+    their corners first (number_vertices' prefix), so that split points, classes and the quad
+    rule's corner-before-centre order come out as over the whole octree; only the range's own
+    tets are emitted and stuffed.  Its cut edges are those its tets hold, plus those its
+    vertices warp onto in touching cells."""
+    around = touching_leaves(keys, levels, first, end)
+    before = int(np.searchsorted(around, first))
+    rows = np.concatenate([around[:before], np.arange(first, end, dtype=np.int64), around[before:]])
+    own = np.arange(before, before + end - first)
+    anchors = octant_lattice_anchors(keys[rows], frame)
+    sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
+    corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+    in_range = band.vertices_at(corners)  # local vertex i < len(in_range) is band vertex in_range[i]
+    vertices = number_vertices(anchors, sides, prefix=band.coords[in_range], eager=False)
+    inside = vertex_classes(vertices, band.inside[in_range])
+    # A touching leaf may have band corners in pieces the range does not read, and spread a
+    # wrong class to the corners it shares; the range's own leaves, whose band corners are
+    # all read, spread theirs last (a leaf with no cut edge gives every sharer one class).
+    _spread_leaf_classes(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids, inside,
+                         in_range.shape[0])
+    own_vertices = LeafVertices(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids,
+                                vertices.coords, vertices.first_centre)
+    tets = graded_tets(own_vertices, inside)
+    cuts, cut_at, targets = _range_cuts(band, in_range, vertices.coords, tets, inside)
+    points, out_tets, _ = stuff(frame.to_space(vertices.coords), vertices.coords, tets, inside, cuts, targets,
+                                first_centre=vertices.first_centre)
+    # Only the points the range's tets use: vertices of touching leaves alone may lack the
+    # edge they warp onto here, and their own range places them.
+    n = vertices.coords.shape[0]
+    used = np.zeros(points.shape[0], dtype=bool)
+    used[out_tets.ravel()] = True
+    new_id = np.cumsum(used) - 1
+    lattice = np.flatnonzero(used[:n])
+    warped = targets[lattice] >= 0
+    target_edges = cut_at[targets[lattice][warped]]
+    target_keys = np.full(lattice.shape[0], -1, dtype=np.int64)
+    target_keys[warped] = band.keys[target_edges]
+    target_faces = np.full(lattice.shape[0], -1, dtype=np.int32)
+    target_faces[warped] = band.faces[target_edges]
+    cut_edges_used = cut_at[used[n:]]
+    return RangeMesh(points[used], new_id[out_tets].astype(np.int32), pack_coords(vertices.coords[lattice]),
+                     inside[lattice], target_keys, target_faces, band.keys[cut_edges_used], band.faces[cut_edges_used])
+
+
+def _range_cuts(band: BandIndex, in_range: np.ndarray, coords: np.ndarray, tets: np.ndarray,
+                inside: np.ndarray) -> tuple[CutEdges, np.ndarray, np.ndarray]:
+    """The range's CutEdges (its tets' mixed edges, then the band edges its band vertices warp
+    onto that its tets lack, where both ends are its vertices), the band edge (E,) of each (an
+    index into band's edges), and the targets (V,) into them.  Local vertex i <
+    len(in_range) is band vertex in_range[i]."""
+    starts, ends, directions, head, upper, chain = collect_cut_edges(tets, inside, coords)
+    cut_at = band.edges_at(edge_keys(coords[starts], coords[ends]))
+    wanted = np.full(in_range.shape[0], -1, dtype=np.int64)
+    warps = band.target_keys[in_range] >= 0
+    wanted[warps] = band.edges_at(band.target_keys[in_range][warps])
+    sorted_ids = np.argsort(cut_at)
+    at, held = sorted_lookup(cut_at[sorted_ids], wanted)
+    extra = np.unique(wanted[(wanted >= 0) & ~held])
+    band_vertices = pack_coords(band.coords[in_range])  # ascending: in_range is
+    start_at, start_found = sorted_lookup(band_vertices, pack_coords(band.starts[extra]))
+    end_at, end_found = sorted_lookup(band_vertices, pack_coords(band.ends[extra]))
+    both = start_found & end_found
+    extra, extra_starts, extra_ends = extra[both], start_at[both].astype(starts.dtype), end_at[both].astype(ends.dtype)
+    # Extra edges are in no tet: the lookup table (head, upper, chain) never reaches them.
+    table = (head, np.concatenate([upper, np.maximum(extra_starts, extra_ends).astype(upper.dtype)]),
+             np.concatenate([chain, np.full(extra.shape[0], -1, dtype=chain.dtype)]))
+    all_at = np.concatenate([cut_at, extra])
+    cuts = CutEdges(np.concatenate([starts, extra_starts]), np.concatenate([ends, extra_ends]),
+                    np.concatenate([directions, band.directions[extra].astype(directions.dtype)]),
+                    band.fracs[all_at], band.points[all_at], table, band.faces[all_at])
+    extra_at, extra_held = sorted_lookup(extra, wanted)
+    targets = np.full(coords.shape[0], -1, dtype=np.int64)
+    held_ids = sorted_ids[at] if sorted_ids.size else at
+    targets[: in_range.shape[0]] = np.where(held, held_ids, np.where(extra_held, cut_at.shape[0] + extra_at, -1))
+    return cuts, all_at, targets
+
+
+def merge_ranges(pieces: list[RangeMesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces as one stuffed mesh: each lattice vertex once (by its coordinates), then
+    each cut point once (by its edge), the cut points of the edges the vertices warp onto
+    included (NaN where no tet uses one): (points (L + C, 3), tets (M, 4) int32, inside (L,),
+    targets (L,) into the C cut points, cut_faces (C,) int32 the triangle of each).  A vertex
+    or cut point the pieces place differently is an AssertionError: stuffing in ranges must
+    agree where they meet."""
+    all_keys = np.concatenate([p.vertex_keys for p in pieces])
+    _, first, vertex_of = np.unique(all_keys, return_index=True, return_inverse=True)
+    n_vertices = first.shape[0]
+    inside_all = np.concatenate([p.inside for p in pieces])
+    inside = inside_all[first]
+    if not np.array_equal(inside[vertex_of], inside_all):
+        raise AssertionError("ranges classify a shared lattice vertex differently")
+    target_keys = np.concatenate([p.target_keys for p in pieces])
+    target_faces = np.concatenate([p.target_faces for p in pieces])
+    cut_keys = np.concatenate([p.cut_keys for p in pieces])
+    warped = target_keys >= 0
+    edges, edge_first = np.unique(np.concatenate([cut_keys, target_keys[warped]]), return_index=True)
+    cut_faces = np.concatenate([np.concatenate([p.cut_faces for p in pieces]), target_faces[warped]])[edge_first]
+    if not np.array_equal(target_keys[first][vertex_of], target_keys):
+        raise AssertionError("ranges warp a shared lattice vertex differently")
+    targets = np.full(n_vertices, -1, dtype=np.int64)
+    targets[vertex_of[warped]] = np.searchsorted(edges, target_keys[warped])
+    points = np.full((n_vertices + edges.shape[0], 3), np.nan)
+    lattice = np.concatenate([p.points[: p.vertex_keys.shape[0]] for p in pieces])
+    points[:n_vertices] = lattice[first]
+    if not np.array_equal(lattice, points[vertex_of]):
+        raise AssertionError("ranges place a shared lattice vertex differently")
+    tets, start = [], 0
+    for p in pieces:
+        n = p.vertex_keys.shape[0]
+        cut_of = n_vertices + np.searchsorted(edges, p.cut_keys)
+        cut_points = p.points[n:]
+        seen = ~np.isnan(points[cut_of, 0])
+        if not np.array_equal(points[cut_of[seen]], cut_points[seen]):
+            raise AssertionError("ranges place a shared cut point differently")
+        points[cut_of] = cut_points
+        tets.append(np.concatenate([vertex_of[start:start + n], cut_of])[p.tets].astype(np.int32))
+        start += n
+    return (points, np.concatenate(tets) if tets else np.zeros((0, 4), dtype=np.int32), inside, targets,
+            cut_faces.astype(np.int32))
+
+
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
                    divisions: float | None = None, max_size: float | None = None) -> MeshResult:
-    """One meshing pass at ``size`` (graded up to max_size, as mesh()), its band computed in
-    n_parts ranges of the key space (finest_band_in_ranges), its leaves meshed in n_parts
-    Morton ranges (mesh_range) and merged (merge_ranges), then finished as one mesh (pinch
-    repair, quality, compaction).
+    """One meshing pass at ``size`` (graded up to max_size, as mesh()) in n_parts ranges: the
+    band in n_parts ranges of the key space (band_in_range), the octree around it, then the
+    leaves in n_parts Morton ranges, each meshed from its leaves, the leaves touching them and
+    the band pieces it reads (mesh_range), merged (merge_ranges) and finished as one mesh
+    (pinch repair, quality, compaction).  No band of the whole surface is built.
 
     The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``
     where that pass needs no mending (its tets inside [10.7, 164.8] degrees at once, as on
@@ -558,23 +665,36 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     the bound warns (mending needs the whole mesh)."""
     if isinstance(n_parts, (bool, np.bool_)) or not isinstance(n_parts, (int, np.integer)) or n_parts < 1:
         raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
+    n_parts = int(n_parts)
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = _at_boundary_size(size_field(h, max_size), h)
     _check_memory(surface, field, _available_memory())
     report = _pass_report(surface, field, h, {})
     stages = _Stages(report, None)
-    frame, _, _, _, keys, levels, band = pass_leaves(
-        surface, field, report, stages,
-        lambda frame, snapped, faces, _, report: finest_band_in_ranges(frame, snapped, faces, n_parts, report))
+    frame = pass_frame(field.size, surface, report)
+    stages.done("frame")
+    snapped, faces, crossings = checked_x_rows(surface, frame)
+    band_bounds_ = band_bounds(frame, snapped, n_parts)
+    band = [band_in_range(frame, snapped, faces, int(band_bounds_[r]), int(band_bounds_[r + 1]))
+            for r in range(n_parts)]
+    report.unresolved_cuts = unresolved_cuts(band)
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field,
+                                      np.concatenate([p.surface_keys for p in band]),
+                                      np.concatenate([p.band_keys for p in band]))
+    report.n_leaves, report.leaf_levels = int(keys.shape[0]), _leaf_levels(frame, levels)
+    stages.done("octree")
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
-    bounds, index = leaf_ranges(keys.shape[0], n_parts), BandIndex.build(band)
-    pieces = [mesh_range(frame, keys, levels, index, int(bounds[r]), int(bounds[r + 1])) for r in range(int(n_parts))]
+    bounds = leaf_ranges(keys.shape[0], n_parts)
+    pieces = []
+    for r in range(n_parts):
+        first, end = int(bounds[r]), int(bounds[r + 1])
+        rows = np.concatenate([np.arange(first, end), touching_leaves(keys, levels, first, end)])
+        read = band_pieces_for(keys, levels, rows, frame.levels, band_bounds_)
+        pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end))
     stages.done("stuff")
-    points, tets, inside, targets = merge_ranges(pieces, band.cuts.starts.shape[0])
-    cut_faces = band.cuts.faces
-    assert cut_faces is not None  # cut_edges records each cut point's triangle
+    points, tets, inside, targets, cut_faces = merge_ranges(pieces)
     result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
     if report.n_tets and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]:
         report.warnings.append(f"dihedral angles {report.min_dihedral:.4g} .. {report.max_dihedral:.4g} leave "
@@ -587,6 +707,12 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     return result
 
 
-__all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_bounds", "band_in_range", "faces_over_rows",
-           "finest_band_in_ranges", "leaf_ranges", "merge_band_pieces", "merge_ranges", "mesh_in_ranges", "mesh_range",
-           "pack_coords", "touching_leaves"]
+def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
+    """How many distinct cut edges of the pieces have no crossing (a midpoint, face -1)."""
+    keys = [edge_keys(p.edge_starts[p.faces < 0], p.edge_ends[p.faces < 0]) for p in pieces]
+    return int(np.unique(np.concatenate(keys)).shape[0]) if keys else 0
+
+
+__all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_bounds", "band_in_range", "band_pieces_for", "edge_keys",
+           "faces_over_rows", "finest_band_in_ranges", "leaf_ranges", "merge_band_pieces", "merge_ranges",
+           "mesh_in_ranges", "mesh_range", "pack_coords", "touching_leaves", "unresolved_cuts"]

@@ -261,7 +261,7 @@ def _row_hits(coords, triangles, unit_bits, offsets, keys, fracs, signs, faces, 
 
 
 @nb.njit(cache=True)
-def _in_row_coordinates(points, basis):
+def in_row_coordinates(points, basis):
     """basis @ p for every point (N, 3) int64 (numpy's integer matmul has no fast path: it
     cost armadillo 0.75 ms a call, 26 calls a mesh)."""
     out = np.empty_like(points)
@@ -300,7 +300,7 @@ def row_crossings(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, direc
     still index ``faces``).  Such a subset gives exactly the full crossings in every cell
     whose closed cube meets no other triangle."""
     T = row_basis(direction)
-    coords = _in_row_coordinates(np.ascontiguousarray(snapped, dtype=np.int64), T)
+    coords = in_row_coordinates(np.ascontiguousarray(snapped, dtype=np.int64), T)
     triangles = np.ascontiguousarray(faces if face_ids is None else np.take(faces, face_ids, axis=0), dtype=np.int64)
     bits = snap_bits(frame)
     # Count, prefix-sum, fill, with a cheap bound (the rows tested) as the count: the exact
