@@ -12,7 +12,7 @@ import paroct
 from paroct import octant
 from paroct.check import canonical_form
 from paroct.octree import balance
-from paroct.partition import leaf_ranges, mesh_in_ranges, mesh_range, touching_leaves
+from paroct.partition import mesh_in_ranges, mesh_range, touching_leaves
 
 from . import naive
 
@@ -29,16 +29,6 @@ def _random_tree(seed: int) -> tuple[np.ndarray, np.ndarray]:
     keys, levels = balance(np.array(seeds_k, dtype=np.int64), seeds_l.astype(np.int8))
     kept = rng.random(keys.shape[0]) < 0.8
     return keys[kept], levels[kept]
-
-
-def test_leaf_ranges_cover_the_leaves_in_order_and_evenly():
-    for n, k in ((10, 3), (7, 7), (3, 5), (0, 2), (1000, 16)):
-        b = leaf_ranges(n, k)
-        sizes = np.diff(b)
-        assert b[0] == 0 and b[-1] == n and len(b) == k + 1 and np.all(sizes >= 0)
-        assert sizes.max() - sizes.min() <= 1
-    with pytest.raises(ValueError):
-        leaf_ranges(5, 0)
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -78,29 +68,32 @@ def test_ranges_cut_through_transition_leaves_and_share_points():
     """The ranges meet across leaves of different sizes (templates on both sides), read only
     the band pieces near them, and share lattice vertices and cut points, placed alike
     (merge_ranges checks)."""
-    from paroct.mesher import X_AXIS_DIRECTION, octree_around_band
-    from paroct.partition import BandIndex, band_bounds, band_in_range, band_pieces_for
+    from paroct.partition import BandIndex, band_in_range, band_pieces_for, octree_in_range, range_bounds
     from paroct.sizing import size_field
 
     surface = paroct.load_surface(DATA / "bunny.stl")
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 20
-    frame, snapped, faces, crossings = _pass_surface(surface, size)
-    band_at = band_bounds(frame, snapped, 6)
-    band = [band_in_range(frame, snapped, faces, int(band_at[r]), int(band_at[r + 1])) for r in range(6)]
-    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, size_field(size),
-                                      np.concatenate([p.surface_keys for p in band]),
-                                      np.concatenate([p.band_keys for p in band]))
-    bounds = leaf_ranges(keys.shape[0], 4)
+    frame, snapped, faces, _ = _pass_surface(surface, size)
+    field = size_field(size)
+    key_bounds = range_bounds(frame, snapped, 6, frame.levels - field.coarse_depth)
+    band = [band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1])) for r in range(6)]
+    surface_keys = np.concatenate([p.surface_keys for p in band])
+    band_keys = np.concatenate([p.band_keys for p in band])
+    octrees = [octree_in_range(frame, snapped, faces, surface, field, surface_keys, band_keys, int(key_bounds[r]),
+                               int(key_bounds[r + 1])) for r in range(6)]
+    keys = np.concatenate([k for k, _ in octrees])
+    levels = np.concatenate([lev for _, lev in octrees])
+    bounds = np.cumsum([0] + [k.shape[0] for k, _ in octrees])
     pieces, read_counts = [], []
-    for r in range(4):
+    for r in range(6):
         first, end = int(bounds[r]), int(bounds[r + 1])
         rows = np.concatenate([np.arange(first, end), touching_leaves(keys, levels, first, end)])
-        read = band_pieces_for(keys, levels, rows, frame.levels, band_at)
+        read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
         read_counts.append(read.shape[0])
         pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end))
     assert min(read_counts) < 6  # a range reads the band near it, not all of it
     mixed = 0
-    for r in range(1, 4):
+    for r in range(1, 6):
         around = touching_leaves(keys, levels, int(bounds[r]), int(bounds[r + 1]))
         mixed += len(set(levels[around].tolist()) | set(levels[bounds[r]:bounds[r + 1]].tolist())) > 1
     assert mixed > 0
@@ -262,12 +255,12 @@ def test_band_pieces_that_disagree_are_refused():
     """A cut point two pieces hold must come out the same in both: a piece whose copy differs
     in its last bit is an AssertionError, not a merged band."""
     from paroct.mesher import MeshReport
-    from paroct.partition import band_bounds, band_in_range, merge_band_pieces, pack_coords
+    from paroct.partition import range_bounds, band_in_range, merge_band_pieces, pack_coords
 
     surface = paroct.load_surface(DATA / "bunny.stl")
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 20
     frame, snapped, faces, _ = _pass_surface(surface, size)
-    bounds = band_bounds(frame, snapped, 3)
+    bounds = range_bounds(frame, snapped, 3)
     pieces = [band_in_range(frame, snapped, faces, int(bounds[r]), int(bounds[r + 1])) for r in range(3)]
     first = set(zip(pack_coords(pieces[0].edge_starts).tolist(), pack_coords(pieces[0].edge_ends).tolist()))
     second = zip(pack_coords(pieces[1].edge_starts).tolist(), pack_coords(pieces[1].edge_ends).tolist())
@@ -278,3 +271,32 @@ def test_band_pieces_that_disagree_are_refused():
     pieces[1] = dataclasses.replace(pieces[1], fracs=fracs)
     with pytest.raises(AssertionError, match="disagree on a shared cut edge"):
         merge_band_pieces(frame, pieces, MeshReport(size, frame.levels))
+
+
+@pytest.mark.parametrize("source, divisions, uniform", [("bunny", 80, False), ("bunny", 40, True), ("wavy", 30, False)])
+def test_the_octree_in_key_ranges_is_the_whole_octree(source, divisions, uniform):
+    """Each range of whole max_size octants balanced from the band and seeds within one
+    max_size octant of it: together, the whole pass's leaves, key for key and level for level
+    (the ring matters: without it, bunny at diag/80 in three ranges has 77 leaves fewer)."""
+    from paroct.mesher import MeshReport, X_AXIS_DIRECTION, finest_band, octree_around_band
+    from paroct.partition import octree_in_range, range_bounds
+    from paroct.sizing import size_field
+
+    surface = paroct.load_surface(_WAVY if source == "wavy" else DATA / f"{source}.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / divisions
+    frame, snapped, faces, crossings = _pass_surface(surface, size)
+    field = size_field(size, size if uniform else None)
+    band = finest_band(frame, snapped, faces, dict(crossings), MeshReport(size, frame.levels))
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys,
+                                      band.keys)
+    assert (len(set(levels.tolist())) == 1) == uniform
+    coarse = frame.levels - field.coarse_depth
+    for n_parts in (2, 3, 8):
+        bounds = range_bounds(frame, snapped, n_parts, coarse)
+        parts = [octree_in_range(frame, snapped, faces, surface, field, band.surface_keys, band.keys, int(bounds[r]),
+                                 int(bounds[r + 1])) for r in range(n_parts)]
+        assert np.array_equal(np.concatenate([k for k, _ in parts]), keys), n_parts
+        assert np.array_equal(np.concatenate([lev for _, lev in parts]), levels), n_parts
+    step = 1 << (3 * (ML - coarse))
+    with pytest.raises(ValueError, match="not whole octants"):
+        octree_in_range(frame, snapped, faces, surface, field, band.surface_keys, band.keys, step // 2, step)

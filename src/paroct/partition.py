@@ -29,12 +29,13 @@ from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, ro
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
                      _cells_around, _check_memory, _finish, _leaf_levels, _losses, _pass_report,
-                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, checked_x_rows, cut_edges, octree_around_band,
+                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, checked_x_rows, cut_edges,
                      pass_frame, resolve_size, vertex_classes)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
-from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
-from .sizing import size_field
+from .octree import _largest_fitting, balance, octant_lattice_anchors, surface_cells, unique_level_keys
+from .band import kept_leaves, surface_prune
+from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field, size_seeds
 from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
@@ -43,14 +44,6 @@ _NO_COORDS = np.zeros((0, 3), dtype=np.int64)
 #: Bits per axis of a packed lattice coordinate (pack_coords): lattice coordinates of a frame
 #: reach 2**MAX_LEVEL.
 _COORD_BITS = 21
-
-
-def leaf_ranges(n_leaves: int, n_parts: int) -> np.ndarray:
-    """Boundaries (n_parts + 1,) int64 of n_parts contiguous ranges of about equal numbers of
-    leaves: range r is leaves[bounds[r]:bounds[r + 1]] (some empty if n_parts > n_leaves)."""
-    if n_parts < 1:
-        raise ValueError(f"n_parts = {n_parts}: must be at least 1")
-    return (np.arange(n_parts + 1, dtype=np.int64) * n_leaves) // n_parts
 
 
 @nb.njit(cache=True)
@@ -137,18 +130,50 @@ def _interval_box(first, end, levels):
 
 
 @nb.njit(cache=True)
+def _box_meets_interval(lo, hi, levels, first, end, stack):
+    """Whether the box of cells lo..hi (inclusive, (3,) int64 coordinates of the cells of
+    ``levels``, within 0 .. 2**levels - 1) holds a cell of Morton key in [first, end)
+    (MAX_LEVEL keys): an exact descent from the root through the octants that the box meets
+    and the interval holds only in part.  stack: (8 * levels + 8, 4) int64 scratch."""
+    shift = MAX_LEVEL - levels
+    n = 1
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, 0, np.int64(1) << levels
+    while n > 0:
+        n -= 1
+        x, y, z, side = stack[n, 0], stack[n, 1], stack[n, 2], stack[n, 3]
+        if x > hi[0] or y > hi[1] or z > hi[2] or x + side <= lo[0] or y + side <= lo[1] or z + side <= lo[2]:
+            continue
+        key = morton_key(x << shift, y << shift, z << shift)
+        last = key + ((side * side * side) << (3 * shift)) - 1
+        if last < first or key >= end:
+            continue
+        if first <= key and last < end:
+            return True
+        half = side >> 1
+        for c in range(8):
+            stack[n, 0] = x + half * (c & 1)
+            stack[n, 1] = y + half * ((c >> 1) & 1)
+            stack[n, 2] = z + half * ((c >> 2) & 1)
+            stack[n, 3] = half
+            n += 1
+    return False
+
+
+@nb.njit(cache=True, inline="always")
+def _boxes_apart(lo, hi, box_lo, box_hi):
+    """Whether two boxes lo..hi and box_lo..box_hi (inclusive, (3,)) share no cell."""
+    return lo[0] > box_hi[0] or lo[1] > box_hi[1] or lo[2] > box_hi[2] or \
+        hi[0] < box_lo[0] or hi[1] < box_lo[1] or hi[2] < box_lo[2]
+
+
+@nb.njit(cache=True)
 def _faces_near_interval(snapped, faces, bits, levels, margin, first, end):
     """Mask (F,) of the triangles whose bounding box, grown by ``margin`` finest cells, meets
-    a finest cell of Morton key in [first, end) (MAX_LEVEL keys): an exact descent from the
-    root through the octants that the box meets and the interval holds only in part."""
+    a finest cell of Morton key in [first, end) (MAX_LEVEL keys; _box_meets_interval)."""
     out = np.zeros(faces.shape[0], dtype=np.bool_)
-    shift = MAX_LEVEL - levels
     top = (np.int64(1) << levels) - 1
     box_lo, box_hi = _interval_box(first, end, levels)
-    stack_x = np.empty(8 * levels + 8, dtype=np.int64)
-    stack_y = np.empty_like(stack_x)
-    stack_z = np.empty_like(stack_x)
-    stack_side = np.empty_like(stack_x)
+    stack = np.empty((8 * levels + 8, 4), dtype=np.int64)
     lo = np.empty(3, dtype=np.int64)
     hi = np.empty(3, dtype=np.int64)
     for f in range(faces.shape[0]):
@@ -157,32 +182,32 @@ def _faces_near_interval(snapped, faces, bits, levels, margin, first, end):
             b = max(snapped[faces[f, 0], k], snapped[faces[f, 1], k], snapped[faces[f, 2], k])
             lo[k] = max((a >> bits) - 1 - margin, 0)  # the closed cells a coordinate touches
             hi[k] = min((b >> bits) + margin, top)
-        if lo[0] > hi[0] or lo[1] > hi[1] or lo[2] > hi[2]:
-            continue
-        if lo[0] > box_hi[0] or lo[1] > box_hi[1] or lo[2] > box_hi[2] or \
-                hi[0] < box_lo[0] or hi[1] < box_lo[1] or hi[2] < box_lo[2]:
-            continue  # far from every cell of the interval: no descent
-        n = 1
-        stack_x[0], stack_y[0], stack_z[0], stack_side[0] = 0, 0, 0, top + 1
-        while n > 0 and not out[f]:
-            n -= 1
-            x, y, z, side = stack_x[n], stack_y[n], stack_z[n], stack_side[n]
-            if x > hi[0] or y > hi[1] or z > hi[2] or x + side <= lo[0] or y + side <= lo[1] or z + side <= lo[2]:
-                continue
-            key = morton_key(x << shift, y << shift, z << shift)
-            last = key + ((side * side * side) << (3 * shift)) - 1
-            if last < first or key >= end:
-                continue
-            if first <= key and last < end:
-                out[f] = True
-                continue
-            half = side >> 1
-            for c in range(8):
-                stack_x[n] = x + half * (c & 1)
-                stack_y[n] = y + half * ((c >> 1) & 1)
-                stack_z[n] = z + half * ((c >> 2) & 1)
-                stack_side[n] = half
-                n += 1
+        if lo[0] > hi[0] or lo[1] > hi[1] or lo[2] > hi[2] or _boxes_apart(lo, hi, box_lo, box_hi):
+            continue  # off the frame, or far from every cell of the interval: no descent
+        out[f] = _box_meets_interval(lo, hi, levels, first, end, stack)
+    return out
+
+
+@nb.njit(cache=True)
+def _octants_near_interval(keys, level, cell_level, first, end):
+    """Mask (K,) of the octants (keys of ``level``) whose box, grown by one cell of
+    cell_level (<= MAX_LEVEL), meets a cell of cell_level of Morton key in [first, end)."""
+    out = np.zeros(keys.shape[0], dtype=np.bool_)
+    top = (np.int64(1) << cell_level) - 1
+    box_lo, box_hi = _interval_box(first, end, cell_level)
+    stack = np.empty((8 * cell_level + 8, 4), dtype=np.int64)
+    lo = np.empty(3, dtype=np.int64)
+    hi = np.empty(3, dtype=np.int64)
+    shift = MAX_LEVEL - cell_level
+    side = np.int64(1) << (MAX_LEVEL - level)
+    for i in range(keys.shape[0]):
+        x, y, z = morton_coords(keys[i])
+        lo[0], lo[1], lo[2] = max((x >> shift) - 1, 0), max((y >> shift) - 1, 0), max((z >> shift) - 1, 0)
+        hi[0] = min(((x + side - 1) >> shift) + 1, top)
+        hi[1] = min(((y + side - 1) >> shift) + 1, top)
+        hi[2] = min(((z + side - 1) >> shift) + 1, top)
+        if not _boxes_apart(lo, hi, box_lo, box_hi):
+            out[i] = _box_meets_interval(lo, hi, cell_level, first, end, stack)
     return out
 
 
@@ -413,16 +438,19 @@ def merge_band_pieces(frame: FatFrame, pieces: list[BandPiece], report: MeshRepo
     return FinestBand(surface_keys, band_keys, BandStuffing(coords, inside, cuts, targets))
 
 
-def band_bounds(frame: FatFrame, snapped: np.ndarray, n_parts: int) -> np.ndarray:
-    """Boundaries (n_parts + 1,) int64 of n_parts ranges of finest-cell Morton keys covering
-    the key space, with about as many surface vertices in each (range r: keys bounds[r] ..
-    bounds[r + 1] - 1)."""
+def range_bounds(frame: FatFrame, snapped: np.ndarray, n_parts: int, level: int | None = None) -> np.ndarray:
+    """Boundaries (n_parts + 1,) int64 of n_parts ranges of Morton keys covering the key
+    space, with about as many surface vertices in each, each range made of whole octants of
+    ``level`` (default frame.levels, the finest cells; some ranges may be empty): range r is
+    keys bounds[r] .. bounds[r + 1] - 1."""
+    level = frame.levels if level is None else level
     cells = (snapped >> rays.snap_bits(frame)).clip(0, (1 << frame.levels) - 1) << (MAX_LEVEL - frame.levels)
     keys = np.sort(morton_keys(cells))
     bounds = np.empty(n_parts + 1, dtype=np.int64)
     bounds[0], bounds[-1] = 0, np.int64(1) << (3 * MAX_LEVEL)
     if keys.shape[0]:
-        bounds[1:-1] = keys[(np.arange(1, n_parts) * keys.shape[0]) // n_parts]
+        align = 3 * (MAX_LEVEL - level)
+        bounds[1:-1] = (keys[(np.arange(1, n_parts) * keys.shape[0]) // n_parts] >> align) << align
     else:
         bounds[1:-1] = 0
     return bounds
@@ -432,9 +460,86 @@ def finest_band_in_ranges(frame: FatFrame, snapped: np.ndarray, faces: np.ndarra
                           report: MeshReport) -> FinestBand:
     """finest_band computed in n_parts ranges of the key space (band_bounds), each from the
     triangles near it (band_in_range), and merged (merge_band_pieces): the same band."""
-    bounds = band_bounds(frame, snapped, n_parts)
+    bounds = range_bounds(frame, snapped, n_parts)
     pieces = [band_in_range(frame, snapped, faces, int(bounds[r]), int(bounds[r + 1])) for r in range(n_parts)]
     return merge_band_pieces(frame, pieces, report)
+
+
+@nb.njit(cache=True)
+def _faces_over_row_box(projected, faces, bits, lo, hi):
+    """Mask (F,) of the triangles whose projection's box (projected: row coordinates (p2, p3)
+    of the snapped vertices, (V, 2)) meets the rows lo..hi (inclusive, (2,), lattice units)."""
+    out = np.zeros(faces.shape[0], dtype=np.bool_)
+    for f in range(faces.shape[0]):
+        ok = True
+        for k in range(2):
+            a = min(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
+            b = max(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
+            ok = ok and (b >> bits) >= lo[k] and -((-a) >> bits) <= hi[k]
+        out[f] = ok
+    return out
+
+
+def faces_over_box_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, direction: int, box_lo: np.ndarray,
+                        box_hi: np.ndarray) -> np.ndarray:
+    """Ascending ids of the triangles that may cross a lattice row of ``direction`` through a
+    lattice point of the box box_lo..box_hi ((3,) int64, inclusive): their row coordinates'
+    boxes meet the rows of the box's corners' span."""
+    basis = row_basis(direction)
+    corners = np.ascontiguousarray(np.where(CUBE_CORNERS == 1, np.asarray(box_hi), np.asarray(box_lo)),
+                                   dtype=np.int64)
+    rows = rays.in_row_coordinates(corners, basis)[:, 1:]
+    projected = np.ascontiguousarray(rays.in_row_coordinates(snapped, basis)[:, 1:])
+    return np.flatnonzero(_faces_over_row_box(projected, faces, bits, rows.min(axis=0), rows.max(axis=0)))
+
+
+def octree_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, surface: Surface, field: SizeField,
+                    surface_keys: np.ndarray, band_keys: np.ndarray, first: int, end: int) -> tuple[np.ndarray, np.ndarray]:
+    """The leaves of octree_around_band's octree (keys (N,) int64, levels (N,) int8, sorted)
+    with keys in [first, end), from the band's cells and the surface's cells within one
+    max_size octant of the range and the triangles over the x rows there.
+
+    [first, end) is made of whole octants of max_size (the coarsest seeds' level, ``coarse``):
+    no seed or leaf the octree keeps straddles it.  A leaf's place in a 2:1-balanced octree
+    depends only on the octants given in the insulation layer of the max_size octant holding
+    it, its 26 neighbours of that size (Sundar, Sampath & Biros 2008, Sec. 4), so balancing the
+    seeds and band cells of the range and that ring gives its leaves.  The seeds are
+    size_seeds' over the ring and range: octants beyond are dropped as if outside, and those
+    partly in it or coarser than max_size and not wholly in the range are left undecided (the
+    surface cells that would decide them may lie beyond)."""
+    finest = frame.levels
+    coarse = max(0, finest - field.coarse_depth)
+    step = np.int64(1) << (3 * (MAX_LEVEL - coarse))
+    if first % step or (end % step and end != np.int64(1) << (3 * MAX_LEVEL)):
+        raise ValueError(f"first = {first}, end = {end}: not whole octants of level {coarse}")
+    surface_keys = surface_keys[_octants_near_interval(surface_keys, finest, coarse, first, end)]
+    band_keys = band_keys[_octants_near_interval(band_keys, finest, coarse, first, end)]
+    box_lo, box_hi = _interval_box(first, end, coarse)
+    grow = finest - coarse
+    column = faces_over_box_rows(snapped, faces, rays.snap_bits(frame), X_AXIS_DIRECTION, (box_lo - 1) << grow,
+                                 (box_hi + 2) << grow)
+    x_rows = rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION, column)
+    classify = surface_prune(frame, surface_keys, x_rows)
+
+    def prune(octants: np.ndarray, level: int) -> np.ndarray:
+        found = np.full(octants.shape[0], OUTSIDE, dtype=np.int8)
+        near = _octants_near_interval(octants, level, coarse, first, end)
+        last = octants + (np.int64(1) << (3 * (MAX_LEVEL - level))) - 1
+        whole = near & ((level >= coarse) | ((octants >= first) & (last < end)))
+        found[near] = UNDECIDED
+        found[whole] = classify(octants[whole], level)
+        return found
+
+    seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field, prune=prune)
+    keys, levels = balance(np.concatenate([band_keys, seeds[0]]),
+                           np.concatenate([np.full(band_keys.shape[0], finest, dtype=np.int8), seeds[1]]))
+    mine = (keys >= first) & (keys < end)
+    keys, levels = keys[mine], levels[mine]
+    in_band = np.zeros(keys.shape[0], dtype=bool)
+    fine = np.nonzero(levels == finest)[0]
+    in_band[fine] = sorted_lookup(band_keys, keys[fine])[1]
+    keep = kept_leaves(frame, keys, levels, in_band, seeds, x_rows)
+    return np.compress(keep, keys), np.compress(keep, levels)
 
 
 @dataclass(frozen=True)
@@ -514,7 +619,7 @@ class RangeMesh:
 
 def band_pieces_for(keys: np.ndarray, levels: np.ndarray, rows: np.ndarray, finest: int,
                     bounds: np.ndarray) -> np.ndarray:
-    """Indices (ascending) of the band pieces of key ranges ``bounds`` (band_bounds) that a
+    """Indices (ascending) of the band pieces of key ranges ``bounds`` (range_bounds) that a
     range whose own and touching leaves are keys[rows] reads: those holding one of its finest
     leaves.  Every cut cell with a corner on one of its own leaves is such a leaf (it touches
     the leaf), so these pieces hold every band vertex its tets use, its class, its warp and
@@ -652,11 +757,12 @@ def merge_ranges(pieces: list[RangeMesh]) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
                    divisions: float | None = None, max_size: float | None = None) -> MeshResult:
-    """One meshing pass at ``size`` (graded up to max_size, as mesh()) in n_parts ranges: the
-    band in n_parts ranges of the key space (band_in_range), the octree around it, then the
-    leaves in n_parts Morton ranges, each meshed from its leaves, the leaves touching them and
-    the band pieces it reads (mesh_range), merged (merge_ranges) and finished as one mesh
-    (pinch repair, quality, compaction).  No band of the whole surface is built.
+    """One meshing pass at ``size`` (graded up to max_size, as mesh()) in n_parts ranges of
+    Morton keys (range_bounds, whole max_size octants): in each, the band from the triangles
+    near it (band_in_range), the octree from the band within one max_size octant of it
+    (octree_in_range), and the tets of its leaves from them, the leaves touching them and the
+    band pieces it reads (mesh_range); then merged (merge_ranges) and finished as one mesh
+    (pinch repair, quality, compaction).  No band or octree of the whole surface is built.
 
     The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``
     where that pass needs no mending (its tets inside [10.7, 164.8] degrees at once, as on
@@ -674,24 +780,27 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     stages = _Stages(report, None)
     frame = pass_frame(field.size, surface, report)
     stages.done("frame")
-    snapped, faces, crossings = checked_x_rows(surface, frame)
-    band_bounds_ = band_bounds(frame, snapped, n_parts)
-    band = [band_in_range(frame, snapped, faces, int(band_bounds_[r]), int(band_bounds_[r + 1]))
-            for r in range(n_parts)]
+    snapped, faces, _ = checked_x_rows(surface, frame)  # refuses rows that enter twice, as mesh() does
+    key_bounds = range_bounds(frame, snapped, n_parts, max(0, frame.levels - field.coarse_depth))
+    band = [band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1])) for r in range(n_parts)]
     report.unresolved_cuts = unresolved_cuts(band)
-    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field,
-                                      np.concatenate([p.surface_keys for p in band]),
-                                      np.concatenate([p.band_keys for p in band]))
+    # Each range's octree reads the band within one max_size octant of it: here, all of it.
+    surface_keys = np.concatenate([p.surface_keys for p in band])
+    band_keys = np.concatenate([p.band_keys for p in band])
+    octrees = [octree_in_range(frame, snapped, faces, surface, field, surface_keys, band_keys, int(key_bounds[r]),
+                               int(key_bounds[r + 1])) for r in range(n_parts)]
+    keys = np.concatenate([leaves for leaves, _ in octrees])
+    levels = np.concatenate([leaf_levels for _, leaf_levels in octrees])
     report.n_leaves, report.leaf_levels = int(keys.shape[0]), _leaf_levels(frame, levels)
     stages.done("octree")
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
-    bounds = leaf_ranges(keys.shape[0], n_parts)
+    bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
     pieces = []
     for r in range(n_parts):
         first, end = int(bounds[r]), int(bounds[r + 1])
         rows = np.concatenate([np.arange(first, end), touching_leaves(keys, levels, first, end)])
-        read = band_pieces_for(keys, levels, rows, frame.levels, band_bounds_)
+        read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
         pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end))
     stages.done("stuff")
     points, tets, inside, targets, cut_faces = merge_ranges(pieces)
@@ -713,6 +822,6 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
     return int(np.unique(np.concatenate(keys)).shape[0]) if keys else 0
 
 
-__all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_bounds", "band_in_range", "band_pieces_for", "edge_keys",
-           "faces_over_rows", "finest_band_in_ranges", "leaf_ranges", "merge_band_pieces", "merge_ranges",
-           "mesh_in_ranges", "mesh_range", "pack_coords", "touching_leaves", "unresolved_cuts"]
+__all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
+           "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "merge_band_pieces", "merge_ranges",
+           "mesh_in_ranges", "mesh_range", "octree_in_range", "pack_coords", "range_bounds", "touching_leaves", "unresolved_cuts"]
