@@ -300,3 +300,16 @@ def test_the_octree_in_key_ranges_is_the_whole_octree(source, divisions, uniform
     step = 1 << (3 * (ML - coarse))
     with pytest.raises(ValueError, match="not whole octants"):
         octree_in_range(frame, snapped, faces, surface, field, band.surface_keys, band.keys, step // 2, step)
+
+
+def test_ranges_refuse_a_surface_overlapping_itself_as_mesh_does():
+    """Each range reads only the x rows through its corners; together they hold every crossing,
+    so the bent bar whose ends pass through each other is refused in ranges too, at a point
+    where a row enters the solid a second time."""
+    from .test_mesher import _bent_bar_overlapping_itself
+
+    vertices, faces = _bent_bar_overlapping_itself()
+    surface = paroct.load_surface((vertices, faces))
+    for n_parts in (1, 5):
+        with pytest.raises(paroct.ParoctError, match="enters or leaves the solid twice in a row"):
+            mesh_in_ranges(surface, divisions=20, n_parts=n_parts)

@@ -880,13 +880,13 @@ def checked_x_rows(surface: Surface, frame: FatFrame) -> tuple[np.ndarray, np.nd
     return snapped, faces, crossings
 
 
-def _check_winding(frame: FatFrame, crossings: rays.RowCrossings) -> None:
+def _check_winding(frame: FatFrame, crossings: rays.RowCrossings, points: np.ndarray | None = None) -> None:
     """Refuse a surface that a lattice row enters twice without leaving (or leaves twice):
     parts that overlap or fold through one another.  Its solid, the points of positive
     winding number, is not what its volume and topology say, so every check of the mesh
     against them would mislead (a self-overlapping bent bar went to min_size and warned of
-    dropped thin parts)."""
-    bad = rays.first_winding_outside(crossings)
+    dropped thin parts).  points: only the rows through them (rays.first_winding_outside)."""
+    bad = rays.first_winding_outside(crossings, points)
     if bad >= 0:
         x, y, z = rays.crossing_points(frame, crossings, np.array([bad]))[0]
         grid = frame.h / 2.0**rays.snap_bits(frame)

@@ -29,7 +29,7 @@ from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, ro
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
                      _cells_around, _check_memory, _finish, _leaf_levels, _losses, _pass_report,
-                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, checked_x_rows, cut_edges,
+                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _check_winding, _Stages, cut_edges,
                      pass_frame, resolve_size, vertex_classes)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
@@ -309,7 +309,9 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
     all the cut edges around a corner of a range cell (which decide its warp), lie in them.
     Their triangles are those whose box meets the range grown by two cells (the margin of
     surface_cells' test), and the classes of their corners come from the x rows through the
-    corners, crossed with the triangles over those rows only (faces_over_rows)."""
+    corners, crossed with the triangles over those rows only (faces_over_rows).  Rows there
+    that enter the solid twice in a row are refused as mesh() refuses them (ParoctError): over
+    all ranges these rows hold every crossing of the surface."""
     levels = frame.levels
     bits = rays.snap_bits(frame)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
@@ -333,6 +335,7 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
     for d in range(EDGE_DIRECTIONS.shape[0]):
         if d != X_AXIS_DIRECTION:
             crossings[d] = rays.row_crossings(frame, local_snapped, local_faces, d, np.flatnonzero(near[read]))
+    _check_winding(frame, crossings[X_AXIS_DIRECTION], corners.coords)  # as mesh() refuses over every row
     corner_class = rays.winding_numbers(crossings[X_AXIS_DIRECTION], corners.coords) > 0
     is_cut = mixed_rows(corners.corner_ids, corner_class)
     cut_cells, kept = _restrict(corners, is_cut)
@@ -780,7 +783,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     stages = _Stages(report, None)
     frame = pass_frame(field.size, surface, report)
     stages.done("frame")
-    snapped, faces, _ = checked_x_rows(surface, frame)  # refuses rows that enter twice, as mesh() does
+    snapped = rays.snap_surface(frame, surface.vertices)
+    faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     key_bounds = range_bounds(frame, snapped, n_parts, max(0, frame.levels - field.coarse_depth))
     band = [band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1])) for r in range(n_parts)]
     report.unresolved_cuts = unresolved_cuts(band)

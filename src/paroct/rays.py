@@ -479,13 +479,31 @@ def crossing_points(frame: FatFrame, crossings: RowCrossings, which: np.ndarray)
 WINDING_TIE = 1e-9
 
 
-def first_winding_outside(crossings: RowCrossings) -> int:
+def first_winding_outside(crossings: RowCrossings, points: np.ndarray | None = None) -> int:
     """Index of the first crossing after which the winding number along its row is neither 0
     nor 1, or -1 if there is none.  Along any line, a closed oriented surface that bounds a
     solid without intersecting itself is entered and left in turn (nested shells included: a
     cavity is left, then an island in it entered), so such a crossing shows parts that
-    overlap or fold through one another, whose winding numbers are 2 or -1."""
-    return int(_first_winding_outside(crossings.keys, crossings.fracs, crossings.signs, WINDING_TIE))
+    overlap or fold through one another, whose winding numbers are 2 or -1.  points (N, 3)
+    int64: only the rows through these lattice points are read (crossings of a subset of the
+    triangles hold whole rows only where the subset holds every triangle over them)."""
+    if points is None:
+        return int(_first_winding_outside(crossings.keys, crossings.fracs, crossings.signs, WINDING_TIE))
+    rows = _row_keys(row_basis(crossings.direction), np.ascontiguousarray(points, dtype=np.int64))
+    row_mask = ~((np.int64(1) << _KEY_BITS) - 1)
+    read = np.flatnonzero(np.isin(crossings.keys & row_mask, rows))
+    bad = _first_winding_outside(crossings.keys[read], crossings.fracs[read], crossings.signs[read], WINDING_TIE)
+    return int(read[bad]) if bad >= 0 else -1
+
+
+@nb.njit(cache=True)
+def _row_keys(basis, points):
+    """The row part of each lattice point's key (_point_key with the cell bits cleared)."""
+    row_mask = ~((np.int64(1) << _KEY_BITS) - 1)
+    out = np.empty(points.shape[0], dtype=np.int64)
+    for i in range(points.shape[0]):
+        out[i] = _point_key(basis, points, i) & row_mask
+    return out
 
 
 @nb.njit(cache=True)
