@@ -60,6 +60,10 @@ def _touching(keys, levels, first, end):
         step = max(side >> 1, np.int64(1))  # a touching leaf of a 2:1-balanced tree is no smaller
         reach = side // step  # probe cells -1 .. reach along each axis: a ring around the leaf
         x0, y0, z0 = morton_coords(keys[i])
+        # Morton keys grow along each axis: the ring's keys lie between its corners' keys.
+        if lo <= morton_key(max(x0 - step, 0), max(y0 - step, 0), max(z0 - step, 0)) and \
+                morton_key(min(x0 + side, root - 1), min(y0 + side, root - 1), min(z0 + side, root - 1)) <= hi:
+            continue
         for c in range(-1, reach + 1):
             for bb in range(-1, reach + 1):
                 for a in range(-1, reach + 1):
@@ -590,7 +594,9 @@ class BandIndex:
     def vertices_at(self, coords: np.ndarray) -> np.ndarray:
         """Indices (ascending, distinct) of the band vertices among coords (K, 3)."""
         at, found = sorted_lookup(self.vertex_keys, pack_coords(coords))
-        return np.unique(at[found])
+        marked = np.zeros(self.vertex_keys.shape[0], dtype=bool)  # not np.unique: a leaf's 8 corners each
+        marked[at[found]] = True
+        return np.flatnonzero(marked)
 
     def edges_at(self, keys: np.ndarray) -> np.ndarray:
         """The index of the cut edge of each key (K,); AssertionError if one is none."""
@@ -632,7 +638,7 @@ def band_pieces_for(keys: np.ndarray, levels: np.ndarray, rows: np.ndarray, fine
 
 
 def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int,
-               end: int) -> RangeMesh:
+               end: int, around: np.ndarray | None = None) -> RangeMesh:
     """Number, classify, emit and stuff the leaves keys[first:end] of graded_leaves' octree
     (keys, levels) from them, the leaves touching them and the band pieces they read (band:
     indexed, BandIndex.from_pieces of band_pieces_for's pieces).
@@ -641,8 +647,10 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
     their corners first (number_vertices' prefix), so that split points, classes and the quad
     rule's corner-before-centre order come out as over the whole octree; only the range's own
     tets are emitted and stuffed.  Its cut edges are those its tets hold, plus those its
-    vertices warp onto in touching cells."""
-    around = touching_leaves(keys, levels, first, end)
+    vertices warp onto in touching cells.  around: touching_leaves(keys, levels, first, end),
+    if the caller has it."""
+    if around is None:
+        around = touching_leaves(keys, levels, first, end)
     before = int(np.searchsorted(around, first))
     rows = np.concatenate([around[:before], np.arange(first, end, dtype=np.int64), around[before:]])
     own = np.arange(before, before + end - first)
@@ -803,9 +811,10 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     pieces = []
     for r in range(n_parts):
         first, end = int(bounds[r]), int(bounds[r + 1])
-        rows = np.concatenate([np.arange(first, end), touching_leaves(keys, levels, first, end)])
-        read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
-        pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end))
+        around = touching_leaves(keys, levels, first, end)
+        read = band_pieces_for(keys, levels, np.concatenate([np.arange(first, end), around]), frame.levels, key_bounds)
+        pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end,
+                                 around))
     stages.done("stuff")
     points, tets, inside, targets, cut_faces = merge_ranges(pieces)
     result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
