@@ -1,18 +1,20 @@
-"""Meshing in Morton ranges: the leaves split into contiguous ranges of their sorted keys, each
-range numbered, classified, emitted and stuffed on its own, and the pieces merged.
+"""Meshing in Morton ranges: the key space cut into ranges of whole max_size octants, each
+range's band, octree and tets built from the surface near it and from its neighbours, and
+the pieces merged.
 
-The first working step toward meshes of 1e9 tets on many workers (docs/design.md, "Toward
-partitions by Morton ranges").  What a range needs beyond its own leaves is one ring of
-leaves touching them (``touching_leaves``): the split points of its transition leaves and
-the classes of its vertices depend on no other leaf.  The band (the surface's cells, the cut
-cells' classes, cut points and warps: the O(surface) work) is computed in ranges of the key
-space too, each from the triangles near it (``band_in_range``), and merged into the whole
-surface's band array for array (``merge_band_pieces``).  The octree and the finish (pinch
-repair, quality, compaction) run in one process; mending by other warps, which needs the
-whole mesh, is not done per range (a range pass whose tets leave the bound says so).  The
-merged mesh is
-the one-process pass's, tet for tet and bit for bit (tests/test_partition.py), because every
-tie stuffing breaks is broken by lattice coordinates, not by vertex ids (sessions 41, 43).
+Steps toward meshes of 1e9 tets on many workers (docs/design.md, "Toward partitions by
+Morton ranges").  A range's band (``band_in_range``: its surface cells, cut cells, classes,
+cut points and warps) needs the triangles near it and the x rows through its corners; its
+octree (``octree_in_range``) the band and seeds of one ring of max_size octants around it
+(the insulation layer of 2:1 balance); its tets (``mesh_range``) its leaves, the leaves
+touching them (``touching_leaves``) and the band pieces holding those.  Pieces name points
+by lattice coordinates and cut points by their edge (``pack_coords``, ``edge_keys``), so they
+join with no shared numbering.  The finish (pinch repair, quality, compaction) runs on the
+merged mesh; mending by other warps, which needs the whole mesh, is not done per range (a
+range pass whose tets leave the bound says so).  The merged mesh is the one-process pass's,
+tet for tet and bit for bit (tests/test_partition.py), because every tie stuffing breaks is
+broken by lattice coordinates, not by vertex ids (sessions 41, 43), and each range's band and
+octree are the whole surface's there.
 """
 
 from __future__ import annotations
