@@ -173,15 +173,20 @@ def _boxes_apart(lo, hi, box_lo, box_hi):
 
 
 @nb.njit(cache=True)
+def _interval_tests(first, end, levels):
+    """What box tests against the interval [first, end) of cells of ``levels`` need: its
+    cells' box (_interval_box), _box_meets_interval's stack, and a box lo, hi (3,) to fill."""
+    box_lo, box_hi = _interval_box(first, end, levels)
+    return box_lo, box_hi, np.empty((8 * levels + 8, 4), dtype=np.int64), np.empty(3, np.int64), np.empty(3, np.int64)
+
+
+@nb.njit(cache=True)
 def _faces_near_interval(snapped, faces, bits, levels, margin, first, end):
     """Mask (F,) of the triangles whose bounding box, grown by ``margin`` finest cells, meets
     a finest cell of Morton key in [first, end) (MAX_LEVEL keys; _box_meets_interval)."""
     out = np.zeros(faces.shape[0], dtype=np.bool_)
     top = (np.int64(1) << levels) - 1
-    box_lo, box_hi = _interval_box(first, end, levels)
-    stack = np.empty((8 * levels + 8, 4), dtype=np.int64)
-    lo = np.empty(3, dtype=np.int64)
-    hi = np.empty(3, dtype=np.int64)
+    box_lo, box_hi, stack, lo, hi = _interval_tests(first, end, levels)
     for f in range(faces.shape[0]):
         for k in range(3):
             a = min(snapped[faces[f, 0], k], snapped[faces[f, 1], k], snapped[faces[f, 2], k])
@@ -200,10 +205,7 @@ def _octants_near_interval(keys, level, cell_level, first, end):
     cell_level (<= MAX_LEVEL), meets a cell of cell_level of Morton key in [first, end)."""
     out = np.zeros(keys.shape[0], dtype=np.bool_)
     top = (np.int64(1) << cell_level) - 1
-    box_lo, box_hi = _interval_box(first, end, cell_level)
-    stack = np.empty((8 * cell_level + 8, 4), dtype=np.int64)
-    lo = np.empty(3, dtype=np.int64)
-    hi = np.empty(3, dtype=np.int64)
+    box_lo, box_hi, stack, lo, hi = _interval_tests(first, end, cell_level)
     shift = MAX_LEVEL - cell_level
     side = np.int64(1) << (MAX_LEVEL - level)
     for i in range(keys.shape[0]):
