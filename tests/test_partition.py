@@ -313,3 +313,27 @@ def test_ranges_refuse_a_surface_overlapping_itself_as_mesh_does():
     for n_parts in (1, 5):
         with pytest.raises(paroct.ParoctError, match="enters or leaves the solid twice in a row"):
             mesh_in_ranges(surface, divisions=20, n_parts=n_parts)
+
+
+def test_ranges_run_side_by_side_in_other_processes():
+    """mapper runs the three stages of every range: with a process pool (the stages' functions
+    and arguments pickle), the same mesh as one after another; each stage maps every range."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    surface = paroct.load_surface(DATA / "bunny.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 25
+    calls = []
+
+    def recording_map(function, *iterables):
+        calls.append(len(iterables[0]))
+        return map(function, *iterables)
+
+    alone = mesh_in_ranges(surface, size, n_parts=3, mapper=recording_map)
+    assert calls == [3, 3, 3]
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        side_by_side = mesh_in_ranges(surface, size, n_parts=3, mapper=pool.map)
+    for got, want in zip(_canonical(side_by_side), _canonical(alone)):
+        assert np.array_equal(got, want)
+    with pytest.raises(paroct.ParoctError, match="mapper = 4"):
+        mesh_in_ranges(surface, size, n_parts=3, mapper=4)

@@ -20,7 +20,8 @@ octree are the whole surface's there.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from functools import partial
+from typing import Callable, Iterable, Sequence
 
 import numba as nb
 import numpy as np
@@ -771,13 +772,19 @@ def merge_ranges(pieces: list[RangeMesh]) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
-                   divisions: float | None = None, max_size: float | None = None) -> MeshResult:
+                   divisions: float | None = None, max_size: float | None = None,
+                   mapper: Callable[..., Iterable] | None = None) -> MeshResult:
     """One meshing pass at ``size`` (graded up to max_size, as mesh()) in n_parts ranges of
     Morton keys (range_bounds, whole max_size octants): in each, the band from the triangles
     near it (band_in_range), the octree from the band within one max_size octant of it
     (octree_in_range), and the tets of its leaves from them, the leaves touching them and the
     band pieces it reads (mesh_range); then merged (merge_ranges) and finished as one mesh
     (pinch repair, quality, compaction).  No band or octree of the whole surface is built.
+
+    mapper(function, *iterables): runs each of the three stages over the ranges and returns
+    their results in order, as the built-in map does (the default: one range after another);
+    an executor's map (concurrent.futures.ProcessPoolExecutor().map, a Dask client's map and
+    gather) runs them side by side: the functions and their arguments pickle.
 
     The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``
     where that pass needs no mending (its tets inside [10.7, 164.8] degrees at once, as on
@@ -786,6 +793,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     the bound warns (mending needs the whole mesh)."""
     if isinstance(n_parts, (bool, np.bool_)) or not isinstance(n_parts, (int, np.integer)) or n_parts < 1:
         raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
+    if mapper is not None and not callable(mapper):
+        raise ParoctError(f"mapper = {mapper!r}: must be a function like map(function, *iterables), or None")
+    run = map if mapper is None else mapper
     n_parts = int(n_parts)
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
@@ -798,13 +808,14 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     key_bounds = range_bounds(frame, snapped, n_parts, max(0, frame.levels - field.coarse_depth))
-    band = [band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1])) for r in range(n_parts)]
+    firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
+    band = list(run(partial(band_in_range, frame, snapped, faces), firsts, ends))
     report.unresolved_cuts = unresolved_cuts(band)
     # Each range's octree reads the band within one max_size octant of it: here, all of it.
     surface_keys = np.concatenate([p.surface_keys for p in band])
     band_keys = np.concatenate([p.band_keys for p in band])
-    octrees = [octree_in_range(frame, snapped, faces, surface, field, surface_keys, band_keys, int(key_bounds[r]),
-                               int(key_bounds[r + 1])) for r in range(n_parts)]
+    octrees = list(run(partial(octree_in_range, frame, snapped, faces, surface, field, surface_keys, band_keys),
+                       firsts, ends))
     keys = np.concatenate([leaves for leaves, _ in octrees])
     levels = np.concatenate([leaf_levels for _, leaf_levels in octrees])
     report.n_leaves, report.leaf_levels = int(keys.shape[0]), _leaf_levels(frame, levels)
@@ -812,13 +823,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
-    pieces = []
-    for r in range(n_parts):
-        first, end = int(bounds[r]), int(bounds[r + 1])
-        around = touching_leaves(keys, levels, first, end)
-        read = band_pieces_for(keys, levels, np.concatenate([np.arange(first, end), around]), frame.levels, key_bounds)
-        pieces.append(mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end,
-                                 around))
+    pieces = list(run(partial(_mesh_range_task, frame, keys, levels, key_bounds, band), bounds[:-1].tolist(),
+                      bounds[1:].tolist()))
     stages.done("stuff")
     points, tets, inside, targets, cut_faces = merge_ranges(pieces)
     result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
@@ -831,6 +837,15 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
         report.warnings.append(f"{lost} (thin walls are not refined in ranges)")
     return result
+
+
+def _mesh_range_task(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_bounds: np.ndarray,
+                     band: Sequence[BandPiece], first: int, end: int) -> RangeMesh:
+    """mesh_range of leaves first..end-1 from the band pieces it reads (band_pieces_for of
+    band, the pieces of the key ranges key_bounds): one range's task in mesh_in_ranges."""
+    around = touching_leaves(keys, levels, first, end)
+    read = band_pieces_for(keys, levels, np.concatenate([np.arange(first, end), around]), frame.levels, key_bounds)
+    return mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end, around)
 
 
 def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
