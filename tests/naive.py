@@ -336,16 +336,19 @@ def star_partners(tets: np.ndarray, star: list[int], v: int) -> dict[tuple[int, 
     return out
 
 
-def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
+def repair_pinches(tets: np.ndarray, bad, rank=None) -> np.ndarray:
     """Alive mask (M,) of paroct.repair's worklist repair, by dictionaries.
 
-    A stack of vertices starts with ``bad``.  A vertex's live star splits into pieces joined
-    through faces containing it; the live faces through it without a live partner give link
-    edges p -> q (faces oriented outward, rotated to start at the vertex).  If the link
-    edges do not form one closed cycle, every piece but the largest (ties: the piece of the
-    earliest tet) goes, or the whole star if it is one piece; the vertices of removed tets
-    are pushed (unless already on the stack).
+    rank (V,): the order of the vertices (default: their ids).  A stack of vertices starts
+    with ``bad`` in ascending rank (the last popped first).  A vertex's live star splits into
+    pieces joined through faces containing it; the live faces through it without a live
+    partner give link edges p -> q (faces oriented outward, rotated to start at the vertex).
+    If the link edges do not form one closed cycle, every piece but the largest goes (ties:
+    the piece holding the tet whose other three vertices' sorted ranks come first), or the
+    whole star if it is one piece; the vertices of removed tets not on the stack are pushed,
+    in ascending rank.
     """
+    rank = list(range(int(tets.max()) + 1)) if rank is None else [int(r) for r in rank]
     faces_of = [(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)]
     star: dict = {}
     holders: dict = {}
@@ -355,7 +358,7 @@ def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
         for f in faces_of:
             holders.setdefault(frozenset(tet[i] for i in f), []).append(t)
     alive = np.ones(len(tets), dtype=bool)
-    work = [int(v) for v in bad]
+    work = sorted((int(v) for v in bad), key=lambda v: rank[v])
     queued = set(work)
     while work:
         v = work.pop()
@@ -395,15 +398,22 @@ def repair_pinches(tets: np.ndarray, bad) -> np.ndarray:
                 continue
         roots = [root(t) for t in live]
         sizes = {r: roots.count(r) for r in roots}
-        keep = min((r for r in sizes if sizes[r] == max(sizes.values())), key=lambda r: live.index(r))
+
+        def tet_key(t, v=v):
+            return sorted(rank[w] for w in tets[t].tolist() if w != v)
+
+        largest = [t for t, r in zip(live, roots) if sizes[r] == max(sizes.values())]
+        keep = roots[live.index(min(largest, key=tet_key))]
+        pushed = []
         for t, r in zip(live, roots):
             if len(sizes) == 1 or r != keep:
                 if alive[t]:
                     alive[t] = False
                     for w in tets[t].tolist():
                         if w not in queued:
-                            work.append(w)
+                            pushed.append(w)
                             queued.add(w)
+        work.extend(sorted(pushed, key=lambda w: rank[w]))
     return alive
 
 

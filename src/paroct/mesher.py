@@ -936,7 +936,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     lattice vertices, points 0..V-1 of the stuffed mesh; cut_faces (E,): the surface triangle
     of each cut point, points V..V+E-1 (CutEdges.faces); size: the band's longest edge."""
     core = _core(inside, targets, points.shape[0])
-    out_tets, report.repaired_tets, faces_out, boundary = remove_pinches(out_tets, core)
+    out_tets, report.repaired_tets, faces_out, boundary = remove_pinches(out_tets, core, points)
     stages.done("repair")
 
     _measure(points, out_tets, core, boundary, report)
