@@ -368,3 +368,24 @@ def test_ranges_repair_pinches_as_the_one_pass_does():
         assert ranged.report.repaired_tets == whole.report.repaired_tets
         for got, expected in zip(_canonical(ranged), want):
             assert np.array_equal(got, expected), n_parts
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_keys_are_routed_to_the_ranges_they_are_near(seed):
+    """keys_near_ranges (each cell's 27 neighbours of the coarse level, looked up once)
+    against every range testing every key (_octants_near_interval, itself against a search
+    of every cell), on random cells and random ranges of whole coarse octants."""
+    from paroct.partition import _octants_near_interval, keys_near_ranges
+
+    rng = np.random.default_rng(6000 + seed)
+    levels, coarse = 5, 2
+    cells = rng.integers(0, 1 << levels, size=(300, 3))
+    keys = np.unique(octant.morton_keys(cells << (ML - levels)))
+    step = 1 << (3 * (ML - coarse))
+    inner = np.sort(rng.integers(0, 1 << (3 * coarse), size=int(rng.integers(1, 7)))) * step
+    bounds = np.array([0, *inner.tolist(), 1 << (3 * ML)], dtype=np.int64)
+    routed = keys_near_ranges(keys, coarse, bounds)
+    assert len(routed) == len(bounds) - 1
+    for r in range(len(bounds) - 1):
+        want = keys[_octants_near_interval(keys, levels, coarse, int(bounds[r]), int(bounds[r + 1]))]
+        assert np.array_equal(routed[r], want), r

@@ -374,13 +374,20 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
 
 
 def _first_of_each(keys: np.ndarray, name: str, *agreeing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(sorted distinct keys, the index of the first occurrence of each) of keys (N,); an
-    AssertionError if two occurrences of a key differ in a row of one of the arrays (N, ...)."""
-    distinct, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    for values in agreeing:
-        if not np.array_equal(values[first][inverse], values):
-            raise AssertionError(f"band pieces disagree on a shared {name}")
-    return distinct, first
+    """(sorted distinct keys, the index of an occurrence of each) of keys (N,); an
+    AssertionError if two occurrences of a key differ in a row of one of the arrays (N, ...)
+    (so any occurrence stands for all)."""
+    order = np.argsort(keys)  # one sort; np.unique's index and inverse cost more
+    ordered = keys[order]
+    starts = np.ones(ordered.shape[0], dtype=bool)
+    starts[1:] = ordered[1:] != ordered[:-1]
+    first = order[starts]
+    if not starts.all():
+        group_first = first[np.cumsum(starts) - 1]  # each occurrence's first, in sorted order
+        for values in agreeing:
+            if not np.array_equal(values[group_first], values[order]):
+                raise AssertionError(f"band pieces disagree on a shared {name}")
+    return ordered[starts], first
 
 
 def merge_band_pieces(frame: FatFrame, pieces: list[BandPiece], report: MeshReport) -> FinestBand:
@@ -503,6 +510,56 @@ def faces_over_box_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, direc
     rows = rays.in_row_coordinates(corners, basis)[:, 1:]
     projected = np.ascontiguousarray(rays.in_row_coordinates(snapped, basis)[:, 1:])
     return np.flatnonzero(_faces_over_row_box(projected, faces, bits, rows.min(axis=0), rows.max(axis=0)))
+
+
+@nb.njit(cache=True)
+def _near_ranges(keys, coarse, bounds, out, offsets):
+    """keys_near_ranges' kernel: with out empty, counts (K,) of the ranges near each key; else fills
+    out from offsets[k] with each key's ranges, ascending."""
+    side = np.int64(1) << (MAX_LEVEL - coarse)
+    root = np.int64(1) << MAX_LEVEL
+    counts = np.zeros(keys.shape[0], dtype=np.int64)
+    found = np.empty(27, dtype=np.int64)
+    for i in range(keys.shape[0]):
+        x0, y0, z0 = morton_coords(keys[i])
+        x0, y0, z0 = x0 & ~(side - 1), y0 & ~(side - 1), z0 & ~(side - 1)
+        n = 0
+        for c in range(27):
+            x = x0 + (c % 3 - 1) * side
+            y = y0 + ((c // 3) % 3 - 1) * side
+            z = z0 + (c // 9 - 1) * side
+            if x < 0 or y < 0 or z < 0 or x >= root or y >= root or z >= root:
+                continue
+            r = np.searchsorted(bounds, morton_key(x, y, z), side="right") - 1
+            listed = False
+            for q in range(n):
+                listed = listed or found[q] == r
+            if not listed:
+                found[n] = r
+                n += 1
+        found[:n].sort()
+        counts[i] = n
+        if out.shape[0]:
+            for q in range(n):
+                out[offsets[i] + q] = found[q]
+    return counts
+
+
+def keys_near_ranges(keys: np.ndarray, coarse: int, bounds: np.ndarray) -> list[np.ndarray]:
+    """For each range of ``bounds`` (range_bounds at level ``coarse``), the keys (ascending,
+    from keys (K,) sorted, of cells of any level not coarser than ``coarse``) of the cells
+    within one octant of level ``coarse`` of it: what octree_in_range reads of them, routed
+    once (27 neighbours a cell) rather than tested by every range."""
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    bounds = np.ascontiguousarray(bounds, dtype=np.int64)
+    counts = _near_ranges(keys, coarse, bounds, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    ranges = np.empty(int(offsets[-1]), dtype=np.int64)
+    _near_ranges(keys, coarse, bounds, ranges, offsets)
+    owner = np.repeat(np.arange(keys.shape[0]), counts)
+    order = np.argsort(ranges, kind="stable")  # by range, then key order
+    split = np.searchsorted(ranges[order], np.arange(bounds.shape[0]))
+    return [keys[owner[order[split[r]:split[r + 1]]]] for r in range(bounds.shape[0] - 1)]
 
 
 def octree_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, surface: Surface, field: SizeField,
@@ -811,10 +868,11 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
     band = list(run(partial(band_in_range, frame, snapped, faces), firsts, ends))
     report.unresolved_cuts = unresolved_cuts(band)
-    # Each range's octree reads the band within one max_size octant of it: here, all of it.
-    surface_keys = np.concatenate([p.surface_keys for p in band])
-    band_keys = np.concatenate([p.band_keys for p in band])
-    octrees = list(run(partial(octree_in_range, frame, snapped, faces, surface, field, surface_keys, band_keys),
+    # Each range's octree reads the band and surface cells within one max_size octant of it.
+    coarse = max(0, frame.levels - field.coarse_depth)
+    near_surface = keys_near_ranges(np.concatenate([p.surface_keys for p in band]), coarse, key_bounds)
+    near_band = keys_near_ranges(np.concatenate([p.band_keys for p in band]), coarse, key_bounds)
+    octrees = list(run(partial(octree_in_range, frame, snapped, faces, surface, field), near_surface, near_band,
                        firsts, ends))
     keys = np.concatenate([leaves for leaves, _ in octrees])
     levels = np.concatenate([leaf_levels for _, leaf_levels in octrees])
@@ -855,5 +913,5 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
 
 
 __all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
-           "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "merge_band_pieces", "merge_ranges",
+           "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges", "merge_band_pieces", "merge_ranges",
            "mesh_in_ranges", "mesh_range", "octree_in_range", "pack_coords", "range_bounds", "touching_leaves", "unresolved_cuts"]
