@@ -226,20 +226,27 @@ def _cells_near_interval(keys, levels, first, end):
     a cell of key in [first, end): one of the 27 cells around it, itself included, is there."""
     out = np.zeros(keys.shape[0], dtype=np.bool_)
     step = np.int64(1) << (MAX_LEVEL - levels)
-    root = np.int64(1) << MAX_LEVEL
     for i in range(keys.shape[0]):
         x0, y0, z0 = morton_coords(keys[i])
         for c in range(27):
-            x = x0 + (c % 3 - 1) * step
-            y = y0 + ((c // 3) % 3 - 1) * step
-            z = z0 + (c // 9 - 1) * step
-            if x < 0 or y < 0 or z < 0 or x >= root or y >= root or z >= root:
-                continue
-            key = morton_key(x, y, z)
+            key = _neighbour_key(x0, y0, z0, c, step)
             if first <= key < end:
                 out[i] = True
                 break
     return out
+
+
+@nb.njit(cache=True, inline="always")
+def _neighbour_key(x0, y0, z0, c, side):
+    """Key of neighbour c (0..26, itself at 13) of the octant of side ``side`` anchored at
+    (x0, y0, z0), or -1 where it lies outside the root."""
+    x = x0 + (c % 3 - 1) * side
+    y = y0 + ((c // 3) % 3 - 1) * side
+    z = z0 + (c // 9 - 1) * side
+    root = np.int64(1) << MAX_LEVEL
+    if x < 0 or y < 0 or z < 0 or x >= root or y >= root or z >= root:
+        return np.int64(-1)
+    return morton_key(x, y, z)
 
 
 @nb.njit(cache=True)
@@ -517,7 +524,6 @@ def _near_ranges(keys, coarse, bounds, out, offsets):
     """keys_near_ranges' kernel: with out empty, counts (K,) of the ranges near each key; else fills
     out from offsets[k] with each key's ranges, ascending."""
     side = np.int64(1) << (MAX_LEVEL - coarse)
-    root = np.int64(1) << MAX_LEVEL
     counts = np.zeros(keys.shape[0], dtype=np.int64)
     found = np.empty(27, dtype=np.int64)
     for i in range(keys.shape[0]):
@@ -525,12 +531,10 @@ def _near_ranges(keys, coarse, bounds, out, offsets):
         x0, y0, z0 = x0 & ~(side - 1), y0 & ~(side - 1), z0 & ~(side - 1)
         n = 0
         for c in range(27):
-            x = x0 + (c % 3 - 1) * side
-            y = y0 + ((c // 3) % 3 - 1) * side
-            z = z0 + (c // 9 - 1) * side
-            if x < 0 or y < 0 or z < 0 or x >= root or y >= root or z >= root:
+            key = _neighbour_key(x0, y0, z0, c, side)
+            if key < 0:
                 continue
-            r = np.searchsorted(bounds, morton_key(x, y, z), side="right") - 1
+            r = np.searchsorted(bounds, key, side="right") - 1
             listed = False
             for q in range(n):
                 listed = listed or found[q] == r
