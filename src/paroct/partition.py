@@ -494,14 +494,14 @@ def finest_band_in_ranges(frame: FatFrame, snapped: np.ndarray, faces: np.ndarra
 @nb.njit(cache=True)
 def _faces_over_row_box(projected, faces, bits, lo, hi):
     """Mask (F,) of the triangles whose projection's box (projected: row coordinates (p2, p3)
-    of the snapped vertices, (V, 2)) meets the rows lo..hi (inclusive, (2,), lattice units)."""
+    of the snapped vertices, (V, 2)) holds a row of lo..hi (inclusive, (2,), lattice units)."""
     out = np.zeros(faces.shape[0], dtype=np.bool_)
     for f in range(faces.shape[0]):
         ok = True
         for k in range(2):
             a = min(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
             b = max(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
-            ok = ok and (b >> bits) >= lo[k] and -((-a) >> bits) <= hi[k]
+            ok = ok and max(-((-a) >> bits), lo[k]) <= min(b >> bits, hi[k])  # rows at ceil(a) .. floor(b)
         out[f] = ok
     return out
 
@@ -585,6 +585,8 @@ def octree_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, sur
     step = np.int64(1) << (3 * (MAX_LEVEL - coarse))
     if first % step or (end % step and end != np.int64(1) << (3 * MAX_LEVEL)):
         raise ValueError(f"first = {first}, end = {end}: not whole octants of level {coarse}")
+    if first >= end:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8)
     surface_keys = surface_keys[_octants_near_interval(surface_keys, finest, coarse, first, end)]
     band_keys = band_keys[_octants_near_interval(band_keys, finest, coarse, first, end)]
     box_lo, box_hi = _interval_box(first, end, coarse)
