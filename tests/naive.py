@@ -741,7 +741,8 @@ def cells_near_interval(cells: np.ndarray, levels: int, first: int, end: int) ->
             for c in cells]
 
 
-def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, basis: np.ndarray, points: np.ndarray) -> list[int]:
+def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, basis: np.ndarray,
+                    points: np.ndarray) -> list[int]:
     """The triangles whose row coordinates (basis rows 1 and 2 of the snapped vertices, over
     2**bits) span a box holding the row of one of the lattice points."""
     rows = {(int(r[0]), int(r[1])) for r in points @ basis[1:].T}

@@ -177,14 +177,16 @@ def test_the_box_of_an_interval_is_the_box_of_its_cells(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_cells_near_an_interval_match_a_search_of_every_cell(seed):
-    from paroct.partition import _cells_near_interval
+    """_octants_near_interval of finest cells, grown by one finest cell: the cells within
+    Chebyshev distance one of a cell of the interval."""
+    from paroct.partition import _octants_near_interval
 
     levels = 3
     rng = np.random.default_rng(3000 + seed)
     cells = rng.integers(0, 1 << levels, size=(80, 3))
     keys = octant.morton_keys(cells << (ML - levels))
     for first, end in [_random_interval(rng, levels) for _ in range(4)]:
-        assert _cells_near_interval(keys, levels, first, end).tolist() == \
+        assert _octants_near_interval(keys, levels, levels, first, end).tolist() == \
             naive.cells_near_interval(cells, levels, first, end)
 
 

@@ -440,7 +440,8 @@ def _write_gmsh(path: Path, points: np.ndarray, tets: np.ndarray, boundary: Boun
         out.write(ints([1]) + box(points) + ints([1], size_t) + ints([1]) + ints([n_patches], size_t)
                   + ints(np.arange(1, n_patches + 1)) + b"\n$EndEntities\n")
         out.write(b"$Nodes\n" + ints([1, len(points), 1, len(points)], size_t) + ints([3, 1, 0]) + ints([len(points)], size_t))
-        out.write(np.arange(1, len(points) + 1, dtype=size_t).data)  # arrays are written through their buffers, uncopied
+        # Arrays are written through their buffers, uncopied.
+        out.write(np.arange(1, len(points) + 1, dtype=size_t).data)
         out.write(np.ascontiguousarray(points, dtype="<f8").data)
         out.write(b"\n$EndNodes\n")
         blocks = [(3, 1, _GMSH_TETRA, tets)] + [(2, p, _GMSH_TRIANGLE, f) for p, f in enumerate(patch_faces, start=1)

@@ -546,7 +546,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                 kept, still, _, _, whole_report, note = _whole_pass(surface, field, size, base, budget, whole_report,
                                                                     progress, stage_seconds)
                 if not still:
-                    whole_report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}", *([note] if note else [])]
+                    whole_report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}",
+                                          *([note] if note else [])]
                     return kept, "", tried, []
                 tried.append(size)
                 note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
@@ -622,8 +623,10 @@ def _refine_rounds(surface: Surface, field: SizeField, framed: FramedSurface, wa
         # Only the cells near the new asks change: check those alone until they are clean.
         changed = merged.keys[wanted.level_of(merged.keys) != merged.levels]
         anchors = octant_lattice_anchors(changed, frame)
-        window = (band_levels(frame, coarse_level, anchors, np.full(changed.shape[0], coarse_level), WINDOW_RING).keys,
-                  band_levels(frame, coarse_level, anchors, np.full(changed.shape[0], coarse_level), WINDOW_RING - 2).keys)
+        at_coarse = np.full(changed.shape[0], coarse_level)
+        outer, inner = (band_levels(frame, coarse_level, anchors, at_coarse, ring).keys
+                        for ring in (WINDOW_RING, WINDOW_RING - 2))
+        window = (outer, inner)
         wanted = merged
         local = _local_tets(surface, field, wanted)
     assert report is not None  # set by every round that does not return
@@ -802,7 +805,8 @@ def pass_frame(h: float, surface: Surface, report: MeshReport) -> FatFrame:
     MAX_FRAME_LEVELS); sets report.levels."""
     frame = fat_frame(surface.bbox_min, surface.bbox_max, h)
     if frame.levels > MAX_FRAME_LEVELS:
-        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, at most {MAX_FRAME_LEVELS})")
+        raise ParoctError(f"size = {h:.6g} is too small for the solid (needs {frame.levels} octree levels, "
+                          f"at most {MAX_FRAME_LEVELS})")
     report.levels = frame.levels
     return frame
 
@@ -1360,14 +1364,17 @@ def graded_leaves(frame: FatFrame, snapped, faces, crossings: dict, surface: Sur
 
 
 def octree_around_band(frame: FatFrame, x_crossings: rays.RowCrossings, surface: Surface, field: SizeField,
-                       surface_keys: np.ndarray, band_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                       surface_keys: np.ndarray, band_keys: np.ndarray, *,
+                       prune: Callable[[np.ndarray, int], np.ndarray] | None = None,
+                       within: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """graded_leaves' octree around a band: the band's cells (band_keys, sorted, finest level)
     and the size field's seeds (pruned where no cell meeting the surface, surface_keys, lies),
     balanced, with the leaves outside the solid dropped: sorted (keys (N,) int64, levels (N,)
-    int8)."""
+    int8).  prune: size_seeds' prune instead of that one; within (first, end): only the leaves
+    of keys first..end-1 (partition.octree_in_range passes both)."""
     finest = frame.levels
     seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field,
-                       prune=surface_prune(frame, surface_keys, x_crossings))
+                       prune=surface_prune(frame, surface_keys, x_crossings) if prune is None else prune)
     seed_keys, seed_levels, _ = seeds
     if np.all(seed_levels == finest):  # a uniform lattice: already balanced, nothing to complete
         keys = sorted_unique(np.concatenate([band_keys, seed_keys]))
@@ -1375,6 +1382,9 @@ def octree_around_band(frame: FatFrame, x_crossings: rays.RowCrossings, surface:
     else:
         keys, levels = balance(np.concatenate([band_keys, seed_keys]),
                                np.concatenate([np.full(band_keys.shape[0], finest, dtype=np.int8), seed_levels]))
+    if within is not None:
+        mine = (keys >= within[0]) & (keys < within[1])
+        keys, levels = keys[mine], levels[mine]
     in_band = np.zeros(keys.shape[0], dtype=bool)
     fine = np.nonzero(levels == finest)[0]
     in_band[fine] = sorted_lookup(band_keys, keys[fine])[1]

@@ -27,18 +27,18 @@ import numba as nb
 import numpy as np
 
 from . import rays
+from .band import surface_prune
 from .errors import ParoctError
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
-                     _cells_around, _check_memory, _finish, _leaf_levels, _losses, _pass_report,
-                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _check_winding, _Stages, cut_edges,
+                     _cells_around, _check_memory, _check_winding, _finish, _leaf_levels, _losses, _pass_report,
+                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
                      pass_frame, resolve_size, vertex_classes)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
-from .octree import _largest_fitting, balance, octant_lattice_anchors, surface_cells, unique_level_keys
-from .band import kept_leaves, surface_prune
-from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field, size_seeds
+from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
+from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field
 from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
@@ -220,22 +220,6 @@ def _octants_near_interval(keys, level, cell_level, first, end):
     return out
 
 
-@nb.njit(cache=True)
-def _cells_near_interval(keys, levels, first, end):
-    """Mask (K,) of the finest cells (keys, of a frame of ``levels`` levels) within one cell of
-    a cell of key in [first, end): one of the 27 cells around it, itself included, is there."""
-    out = np.zeros(keys.shape[0], dtype=np.bool_)
-    step = np.int64(1) << (MAX_LEVEL - levels)
-    for i in range(keys.shape[0]):
-        x0, y0, z0 = morton_coords(keys[i])
-        for c in range(27):
-            key = _neighbour_key(x0, y0, z0, c, step)
-            if first <= key < end:
-                out[i] = True
-                break
-    return out
-
-
 @nb.njit(cache=True, inline="always")
 def _neighbour_key(x0, y0, z0, c, side):
     """Key of neighbour c (0..26, itself at 13) of the octant of side ``side`` anchored at
@@ -249,6 +233,15 @@ def _neighbour_key(x0, y0, z0, c, side):
     return morton_key(x, y, z)
 
 
+@nb.njit(cache=True, inline="always")
+def _projected_rows(projected, faces, f, bits, k):
+    """The rows (first, last, lattice units; last < first if none) along row coordinate k that
+    triangle f's projection's box holds: ceil and floor of its extent over 2**bits."""
+    a = min(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
+    b = max(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
+    return -((-a) >> bits), b >> bits
+
+
 @nb.njit(cache=True)
 def _faces_over_rows(projected, faces, bits, table, row_lo, n_a, n_b):
     """Mask (F,) of the triangles whose projection's bounding box (projected: the snapped
@@ -256,22 +249,18 @@ def _faces_over_rows(projected, faces, bits, table, row_lo, n_a, n_b):
     (n_a + 1, n_b + 1) of the rows from row_lo on."""
     out = np.zeros(faces.shape[0], dtype=np.bool_)
     for f in range(faces.shape[0]):
-        a0 = min(projected[faces[f, 0], 0], projected[faces[f, 1], 0], projected[faces[f, 2], 0])
-        a1 = max(projected[faces[f, 0], 0], projected[faces[f, 1], 0], projected[faces[f, 2], 0])
-        b0 = min(projected[faces[f, 0], 1], projected[faces[f, 1], 1], projected[faces[f, 2], 1])
-        b1 = max(projected[faces[f, 0], 1], projected[faces[f, 1], 1], projected[faces[f, 2], 1])
-        # Rows at integer (p2, p3) inside [a0, a1] x [b0, b1] / 2**bits, from row_lo on.
-        i0 = max(-((-a0) >> bits) - row_lo[0], 0)
-        i1 = min((a1 >> bits) - row_lo[0], n_a - 1)
-        j0 = max(-((-b0) >> bits) - row_lo[1], 0)
-        j1 = min((b1 >> bits) - row_lo[1], n_b - 1)
+        a0, a1 = _projected_rows(projected, faces, f, bits, 0)
+        b0, b1 = _projected_rows(projected, faces, f, bits, 1)
+        i0, i1 = max(a0 - row_lo[0], 0), min(a1 - row_lo[0], n_a - 1)  # from row_lo on
+        j0, j1 = max(b0 - row_lo[1], 0), min(b1 - row_lo[1], n_b - 1)
         if i0 > i1 or j0 > j1:
             continue
         out[f] = table[i1 + 1, j1 + 1] - table[i0, j1 + 1] - table[i1 + 1, j0] + table[i0, j0] > 0
     return out
 
 
-def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, direction: int, points: np.ndarray) -> np.ndarray:
+def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, direction: int,
+                    points: np.ndarray) -> np.ndarray:
     """Ascending ids of the triangles that may cross the lattice rows of ``direction`` through
     points (N, 3) int64 (their row coordinates' boxes hold one of those rows): with them,
     rays.row_crossings gives those rows exactly, so winding numbers and cut points there."""
@@ -333,7 +322,7 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     near = _faces_near_interval(snapped, faces, bits, levels, 2, first, end)
     met = surface_cells(frame, snapped, faces[near], bits, levels)
-    met = met[_cells_near_interval(met, levels, first, end)]
+    met = met[_octants_near_interval(met, levels, levels, first, end)]  # within one cell of the range
     own = (met >= first) & (met < end)
     corners = number_vertices(octant_lattice_anchors(met, frame), np.ones(met.shape[0], dtype=np.int64))
     column = np.zeros(faces.shape[0], dtype=bool)
@@ -412,55 +401,28 @@ def merge_band_pieces(frame: FatFrame, pieces: list[BandPiece], report: MeshRepo
                               np.ones(surface_keys.shape[0], dtype=np.int64))
     cut_cells, _ = _restrict(corners, sorted_lookup(cut_keys, surface_keys)[1])
     coords = cut_cells.coords
-    # The pieces' vertices and edges, each once, by coordinates.
-    vertex_keys = pack_coords(np.concatenate([p.coords for p in pieces]))
-    inside_all = np.concatenate([p.inside for p in pieces])
-    edge_starts = pack_coords(np.concatenate([p.edge_starts for p in pieces]))
-    edge_ends = pack_coords(np.concatenate([p.edge_ends for p in pieces]))
-    offsets = np.cumsum([0] + [p.edge_starts.shape[0] for p in pieces])
-    target_all = np.concatenate([np.where(p.targets >= 0, p.targets + o, -1) for p, o in zip(pieces, offsets)])
-    has_target = target_all >= 0
-    target_pairs = np.full((target_all.shape[0], 2), -1, dtype=np.int64)
-    target_pairs[has_target] = np.stack([edge_starts, edge_ends], axis=1)[target_all[has_target]]
-    vertex_sorted, vertex_first = _first_of_each(vertex_keys, "vertex", inside_all, target_pairs)
-    at, found = sorted_lookup(vertex_sorted, pack_coords(coords))
-    if not found.all() or vertex_sorted.shape[0] != coords.shape[0]:
-        raise AssertionError(f"the pieces hold {vertex_sorted.shape[0]} band vertices, the cut cells "
+    index = BandIndex.from_pieces(pieces)  # the pieces' vertices and edges, each once, checked alike
+    at, found = sorted_lookup(index.vertex_keys, pack_coords(coords))
+    if not found.all() or index.vertex_keys.shape[0] != coords.shape[0]:
+        raise AssertionError(f"the pieces hold {index.vertex_keys.shape[0]} band vertices, the cut cells "
                              f"{coords.shape[0]}")
-    inside = inside_all[vertex_first[at]]
-    # Edges by their ends' ids in the merged numbering.
-    id_of = np.empty(coords.shape[0], dtype=np.int64)
-    id_of[at] = np.arange(coords.shape[0])
-    start_at, start_found = sorted_lookup(vertex_sorted, edge_starts)
-    end_at, end_found = sorted_lookup(vertex_sorted, edge_ends)
-    if not (start_found.all() and end_found.all()):
-        raise AssertionError("a cut edge of a band piece ends off the band's vertices")
-    n = coords.shape[0]
-    edge_keys = id_of[start_at] * n + id_of[end_at]
-    directions = np.concatenate([p.directions for p in pieces])
-    fracs = np.concatenate([p.fracs for p in pieces])
-    points = np.concatenate([p.points for p in pieces])
-    faces = np.concatenate([p.faces for p in pieces])
-    edge_sorted, edge_first = _first_of_each(edge_keys, "cut edge", directions, fracs.view(np.int64),
-                                             points.view(np.int64), faces)
+    inside = index.inside[at]
     starts, ends, dirs, *table = collect_cut_edges(graded_tets(cut_cells), inside, coords)
-    e_at, e_found = sorted_lookup(edge_sorted, starts.astype(np.int64) * n + ends)
-    if not e_found.all() or edge_sorted.shape[0] != starts.shape[0]:
-        raise AssertionError(f"the pieces hold {edge_sorted.shape[0]} cut edges, the cut cells {starts.shape[0]}")
-    take = edge_first[e_at]
-    if not np.array_equal(directions[take], dirs):
+    if index.keys.shape[0] != starts.shape[0]:
+        raise AssertionError(f"the pieces hold {index.keys.shape[0]} cut edges, the cut cells {starts.shape[0]}")
+    keys = edge_keys(coords[starts], coords[ends])
+    e = index.edges_at(keys)
+    if not np.array_equal(index.directions[e], dirs):
         raise AssertionError("band pieces give a cut edge another direction")
-    crossed = faces[take]
-    cuts = CutEdges(starts, ends, dirs, fracs[take], points[take], tuple(table), crossed)
+    crossed = index.faces[e]
+    cuts = CutEdges(starts, ends, dirs, index.fracs[e], index.points[e], tuple(table), crossed)
     report.unresolved_cuts += int(np.count_nonzero(crossed < 0))
-    # Each vertex's warp: its piece's target edge, found among the merged edges.
-    order = np.empty(edge_sorted.shape[0], dtype=np.int64)
-    order[e_at] = np.arange(starts.shape[0])
-    warp_at = vertex_first[at]
-    targets = np.full(n, -1, dtype=np.int64)
-    warped = has_target[warp_at]
-    t = target_all[warp_at[warped]]
-    targets[warped] = order[sorted_lookup(edge_sorted, id_of[start_at[t]] * n + id_of[end_at[t]])[0]]
+    # Each vertex's warp: its pieces' target edge, found among the merged edges.
+    order = np.argsort(keys)
+    target_keys = index.target_keys[at]
+    targets = np.full(coords.shape[0], -1, dtype=np.int64)
+    warped = target_keys >= 0
+    targets[warped] = order[np.searchsorted(keys[order], target_keys[warped])]
     return FinestBand(surface_keys, band_keys, BandStuffing(coords, inside, cuts, targets))
 
 
@@ -484,7 +446,7 @@ def range_bounds(frame: FatFrame, snapped: np.ndarray, n_parts: int, level: int 
 
 def finest_band_in_ranges(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, n_parts: int,
                           report: MeshReport) -> FinestBand:
-    """finest_band computed in n_parts ranges of the key space (band_bounds), each from the
+    """finest_band computed in n_parts ranges of the key space (range_bounds), each from the
     triangles near it (band_in_range), and merged (merge_band_pieces): the same band."""
     bounds = range_bounds(frame, snapped, n_parts)
     pieces = [band_in_range(frame, snapped, faces, int(bounds[r]), int(bounds[r + 1])) for r in range(n_parts)]
@@ -497,12 +459,9 @@ def _faces_over_row_box(projected, faces, bits, lo, hi):
     of the snapped vertices, (V, 2)) holds a row of lo..hi (inclusive, (2,), lattice units)."""
     out = np.zeros(faces.shape[0], dtype=np.bool_)
     for f in range(faces.shape[0]):
-        ok = True
-        for k in range(2):
-            a = min(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
-            b = max(projected[faces[f, 0], k], projected[faces[f, 1], k], projected[faces[f, 2], k])
-            ok = ok and max(-((-a) >> bits), lo[k]) <= min(b >> bits, hi[k])  # rows at ceil(a) .. floor(b)
-        out[f] = ok
+        a0, a1 = _projected_rows(projected, faces, f, bits, 0)
+        b0, b1 = _projected_rows(projected, faces, f, bits, 1)
+        out[f] = max(a0, lo[0]) <= min(a1, hi[0]) and max(b0, lo[1]) <= min(b1, hi[1])
     return out
 
 
@@ -567,7 +526,8 @@ def keys_near_ranges(keys: np.ndarray, coarse: int, bounds: np.ndarray) -> list[
 
 
 def octree_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, surface: Surface, field: SizeField,
-                    surface_keys: np.ndarray, band_keys: np.ndarray, first: int, end: int) -> tuple[np.ndarray, np.ndarray]:
+                    surface_keys: np.ndarray, band_keys: np.ndarray, first: int,
+                    end: int) -> tuple[np.ndarray, np.ndarray]:
     """The leaves of octree_around_band's octree (keys (N,) int64, levels (N,) int8, sorted)
     with keys in [first, end), from the band's cells and the surface's cells within one
     max_size octant of the range and the triangles over the x rows there.
@@ -605,16 +565,7 @@ def octree_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, sur
         found[whole] = classify(octants[whole], level)
         return found
 
-    seeds = size_seeds(frame, surface.bbox_min - frame.h, surface.bbox_max + frame.h, field, prune=prune)
-    keys, levels = balance(np.concatenate([band_keys, seeds[0]]),
-                           np.concatenate([np.full(band_keys.shape[0], finest, dtype=np.int8), seeds[1]]))
-    mine = (keys >= first) & (keys < end)
-    keys, levels = keys[mine], levels[mine]
-    in_band = np.zeros(keys.shape[0], dtype=bool)
-    fine = np.nonzero(levels == finest)[0]
-    in_band[fine] = sorted_lookup(band_keys, keys[fine])[1]
-    keep = kept_leaves(frame, keys, levels, in_band, seeds, x_rows)
-    return np.compress(keep, keys), np.compress(keep, levels)
+    return octree_around_band(frame, x_rows, surface, field, surface_keys, band_keys, prune=prune, within=(first, end))
 
 
 @dataclass(frozen=True)
@@ -870,12 +821,12 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     stages.done("frame")
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    key_bounds = range_bounds(frame, snapped, n_parts, max(0, frame.levels - field.coarse_depth))
+    coarse = max(0, frame.levels - field.coarse_depth)  # the seeds' coarsest level: ranges are its octants
+    key_bounds = range_bounds(frame, snapped, n_parts, coarse)
     firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
     band = list(run(partial(band_in_range, frame, snapped, faces), firsts, ends))
     report.unresolved_cuts = unresolved_cuts(band)
     # Each range's octree reads the band and surface cells within one max_size octant of it.
-    coarse = max(0, frame.levels - field.coarse_depth)
     near_surface = keys_near_ranges(np.concatenate([p.surface_keys for p in band]), coarse, key_bounds)
     near_band = keys_near_ranges(np.concatenate([p.band_keys for p in band]), coarse, key_bounds)
     octrees = list(run(partial(octree_in_range, frame, snapped, faces, surface, field), near_surface, near_band,
@@ -919,5 +870,6 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
 
 
 __all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
-           "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges", "merge_band_pieces", "merge_ranges",
-           "mesh_in_ranges", "mesh_range", "octree_in_range", "pack_coords", "range_bounds", "touching_leaves", "unresolved_cuts"]
+           "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges",
+           "merge_band_pieces", "merge_ranges", "mesh_in_ranges", "mesh_range", "octree_in_range", "pack_coords",
+           "range_bounds", "touching_leaves", "unresolved_cuts"]

@@ -675,4 +675,5 @@ def _read_msh(data: bytes) -> SurfaceFile:
                        face_groups, group_names)
 
 
-_READERS: dict[str, Callable[[bytes], SurfaceFile]] = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off, ".ply": _read_ply, ".msh": _read_msh}
+_READERS: dict[str, Callable[[bytes], SurfaceFile]] = {".stl": _read_stl, ".obj": _read_obj, ".off": _read_off,
+                                                       ".ply": _read_ply, ".msh": _read_msh}
