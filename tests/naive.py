@@ -503,15 +503,16 @@ def group_by_vertex(vertices: np.ndarray, owners: np.ndarray) -> list[list[int]]
             for v in vertices]
 
 
-def retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points, inside,
-             coords, first_centre, table, prism, lo, hi, min_ratio, sweeps):
-    """stuffing._retarget without skipping any vertex: each sweep scores every vertex's star
-    and, where it is bad, tries every option (in place, as _retarget)."""
+def retarget(vertices, visit, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points,
+             inside, coords, first_centre, table, prism, lo, hi, min_ratio, sweeps):
+    """stuffing._retarget without skipping any vertex: each sweep scores every vertex's star,
+    in the order visit, and, where it is bad, tries every option (in place, as _retarget)."""
     from paroct.stuffing import _set_warp, _star_score
 
     for _ in range(sweeps):
         moved = 0
-        for i, v in enumerate(vertices):
+        for i in visit:
+            v = vertices[i]
             star = stars[star_first[i]:star_first[i + 1]]
             score = _star_score(star, tets, signs, points, lattice_points, coords, first_centre, table, prism, lo, hi)
             if score[0] <= 0 and score[1] >= min_ratio:

@@ -965,13 +965,15 @@ def _set_warp(v, e, signs, targets, points, lattice_points, inside):
 
 
 @nb.njit(cache=True)
-def _retarget(vertices, star_first, stars, option_first, options, tets, signs, targets, points, lattice_points,
-              inside, coords, first_centre, table, prism, lo, hi, min_ratio, sweeps):
+def _retarget(vertices, visit, star_first, stars, option_first, options, tets, signs, targets, points,
+              lattice_points, inside, coords, first_centre, table, prism, lo, hi, min_ratio, sweeps):
     """Greedy local search: for each vertex whose star has a stencil tet outside [lo, hi] or
     with 3r/R below min_ratio, the warp (none, or onto the cut point of one of its cut edges)
     that brings the star's worst violation lowest, ties to the largest smallest 3r/R (needles:
-    their angles can be good); sweeps until nothing changes.  Changes signs, targets and
-    points in place.  Returns whether the last sweep moved no vertex (settled).
+    their angles can be good), then to the option tried first; sweeps until nothing changes.
+    Each sweep visits vertices[visit[0]], vertices[visit[1]], ... (vertices: sorted ids;
+    visit: retarget_warps' order of their coordinates).  Changes signs, targets and points in
+    place.  Returns whether the last sweep moved no vertex (settled).
 
     A vertex whose star's vertices have not moved since it was last visited is skipped: its
     star scores as then, and the choice it made then (the first best) stays the first best.
@@ -984,7 +986,7 @@ def _retarget(vertices, star_first, stars, option_first, options, tets, signs, t
     moved = 0
     for _ in range(sweeps):
         moved = 0
-        for i in range(n):
+        for i in visit:
             v = vertices[i]
             star = stars[star_first[i]:star_first[i + 1]]
             if visited_at[i] >= 0 and not _star_moved_since(star, tets, vertices, moved_at, visited_at[i]):
@@ -1053,11 +1055,12 @@ def _group_by_vertex(vertices, marked, owners):
 
 
 @nb.njit(cache=True)
-def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain):
-    """The cut edges of each vertex, grouped as _group_by_vertex groups the rows of (starts,
-    ends): group i, those of vertices[i], is options[first[i]:first[i + 1]], first the edges
-    it starts, then those it ends, each in edge order.  Each vertex's edges are found through
-    the edge table (collect_cut_edges' head, upper, chain) from the tets of its star
+def _star_options(vertices, star_first, stars, tets, coords, head, upper, chain):
+    """The cut edges of each vertex, in order of their other ends' lattice coordinates
+    (_coords_less): group i, those of vertices[i], is options[first[i]:first[i + 1]].  The
+    order, the one retarget_warps tries them in and its first best among equals, follows the
+    points, not their ids.  Each vertex's edges are found through the edge table
+    (collect_cut_edges' head, upper, chain) from the tets of its star
     (stars[star_first[i]:star_first[i + 1]], rows of tets): every cut edge is an edge of
     the tets it came from.  Returns (first (G + 1,), options) int64."""
     n = vertices.shape[0]
@@ -1066,7 +1069,8 @@ def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain)
     longest = 0
     for i in range(n):
         longest = max(longest, star_first[i + 1] - star_first[i])
-    edges = np.empty(3 * longest, dtype=np.int64)  # a vertex's distinct edges, ascending
+    edges = np.empty(3 * longest, dtype=np.int64)  # a vertex's distinct edges so far, in order
+    others = np.empty(3 * longest, dtype=np.int64)  # their other ends
     for fill in range(2):
         if fill:
             for i in range(n):
@@ -1084,23 +1088,20 @@ def _star_options(vertices, star_first, stars, tets, starts, head, upper, chain)
                     if e < 0:
                         continue
                     j = m  # insertion into the few edges so far
-                    while j > 0 and edges[j - 1] > e:
+                    while j > 0 and _coords_less(coords, w, others[j - 1]):
                         j -= 1
-                    if j > 0 and edges[j - 1] == e:
+                    if j > 0 and others[j - 1] == w:
                         continue
                     for q in range(m, j, -1):
                         edges[q] = edges[q - 1]
+                        others[q] = others[q - 1]
                     edges[j] = e
+                    others[j] = w
                     m += 1
-            if not fill:
+            if fill:
+                found[first[i]:first[i] + m] = edges[:m]
+            else:
                 first[i + 1] = m
-                continue
-            j = first[i]
-            for started in (True, False):
-                for e in edges[:m]:
-                    if (starts[e] == v) == started:
-                        found[j] = e
-                        j += 1
     return first, found
 
 
@@ -1125,6 +1126,13 @@ class Retargeted:
     settled: bool
 
 
+def _coords_order(coords: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """The permutation (len(vertices),) int64 that puts vertices in lexicographic order of
+    their lattice coordinates coords (V, 3) (x, then y, then z: _coords_less's order)."""
+    c = np.take(coords, vertices, axis=0)
+    return np.lexsort((c[:, 2], c[:, 1], c[:, 0])).astype(np.int64)
+
+
 def _bad_tet_vertices(tets: np.ndarray, offsets: np.ndarray, bad: np.ndarray) -> np.ndarray:
     """The vertices (ascending, int64) of the lattice tets (T, 4) that stuffed tets ``bad`` (indices
     into stuff's output, whose lattice tet t's tets start at offsets[t]) came from: the vertices
@@ -1146,7 +1154,9 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     so each vertex of the lattice tets that gave the bad tets may instead warp onto the cut
     point of any of its cut edges, or not at all; the choice that leaves its star's worst
     angle least outside the bound is kept (_retarget), among equals the one with the fattest
-    star by 3r/R.  Tets the warps would fold count as outside.  Arguments as for stuff, and
+    star by 3r/R.  The vertices are visited, and their cut edges tried, in order of lattice
+    coordinates, so the result is the same however the points are numbered (a partition
+    numbers its own).  Tets the warps would fold count as outside.  Arguments as for stuff, and
     bad: indices of the bad tets (outside the bound or needles) in stuff's output, offsets:
     stuff's (where each lattice tet's tets start in it); points: stuff's points, if the caller
     has them, which are then updated in place to the new warps (restuff takes them), saving a
@@ -1171,11 +1181,13 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     rows = np.flatnonzero(touching(tets, marked))
     star_first, star_rows = _group_by_vertex(vertices, marked, np.take(tets, rows, axis=0))
     stars = rows[star_rows]
-    # A vertex's options: the cut edges it starts, then those it ends, each in order.
-    option_first, options = _star_options(vertices, star_first, stars, tets, cuts.starts, *cuts.table)
-    settled = _retarget(vertices, star_first, stars, option_first, options, tets, signs, new, points, lattice_points,
-                        inside, coords, _first_centre(first_centre, lattice_points), cuts.table, PRISM_TETS,
-                        DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio), RETARGET_SWEEPS)
+    # The vertices are visited, and their cut edges tried, in order of coordinates: the
+    # search's greedy choices then follow the points, however they are numbered.
+    option_first, options = _star_options(vertices, star_first, stars, tets, coords, *cuts.table)
+    settled = _retarget(vertices, _coords_order(coords, vertices), star_first, stars, option_first, options, tets,
+                        signs, new, points, lattice_points, inside, coords, _first_centre(first_centre, lattice_points),
+                        cuts.table, PRISM_TETS, DIHEDRAL_BOUND[0], DIHEDRAL_BOUND[1], float(min_ratio),
+                        RETARGET_SWEEPS)
     # Only the searched vertices move; the lattice tets to stuff again are their stars.
     moved = np.take(new, vertices) != np.take(targets, vertices)
     in_moved_star = np.repeat(moved, np.diff(star_first))
