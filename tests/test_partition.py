@@ -12,7 +12,7 @@ import paroct
 from paroct import octant
 from paroct.check import canonical_form
 from paroct.octree import balance
-from paroct.partition import mesh_in_ranges, mesh_range, touching_leaves
+from paroct.partition import mesh_in_ranges, mesh_range, pack_coords, touching_leaves
 
 from . import naive
 
@@ -103,16 +103,76 @@ def test_ranges_cut_through_transition_leaves_and_share_points():
     assert sum(p.tets.shape[0] for p in pieces) > 0
 
 
-def test_a_range_pass_that_needs_mending_says_so():
+@pytest.mark.parametrize("n_parts", [1, 3])
+def test_a_range_pass_that_needs_mending_mends_as_mesh_does(n_parts):
     """bunny at diag/30, uniform: a stuffed tet of 10.48 degrees, which mesh() mends by other
-    warps over the whole mesh; the ranges keep it and warn."""
+    warps over the whole mesh; the ranges' lattice tets, joined, are stuffed and mended the
+    same: the same mesh, in the bound, with no warning of bad tets."""
     surface = paroct.load_surface(DATA / "bunny.stl")
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 30
     whole = paroct.mesh(surface, size, max_size=size, thin_features=False)
-    ranged = mesh_in_ranges(surface, size, n_parts=3, max_size=size)
-    assert "warps" in whole.report.stage_seconds and whole.report.min_dihedral >= 10.7
-    assert ranged.report.min_dihedral < 10.7
-    assert any("mending" in w for w in ranged.report.warnings)
+    ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size)
+    assert "warps" in whole.report.stage_seconds and "warps" in ranged.report.stage_seconds
+    assert ranged.report.min_dihedral >= 10.7 and not any("degrees" in w for w in ranged.report.warnings)
+    a, b = _canonical(whole), _canonical(ranged)
+    assert all(x.shape == y.shape and np.array_equal(x, y) for x, y in zip(a, b))
+    assert ranged.report.n_tets == whole.report.n_tets and ranged.report.repaired_tets == whole.report.repaired_tets
+
+
+def test_joined_range_lattices_are_the_whole_octrees_lattice():
+    """merge_range_lattices over 4 ranges of bunny at diag/20 (graded): the lattice tets,
+    classes and warps of the one pass, named by coordinates, the face centres that are no
+    leaf's corner numbered last; a piece that classes a shared vertex otherwise is refused."""
+    from paroct.lattice import graded_tets, number_vertices
+    from paroct.mesher import MeshReport, X_AXIS_DIRECTION, finest_band, octree_around_band, vertex_classes
+    from paroct.octree import octant_lattice_anchors
+    from paroct.partition import BandIndex, band_in_range, merge_range_lattices, range_bounds, range_lattice
+    from paroct.sizing import size_field
+
+    surface = paroct.load_surface(DATA / "bunny.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 20
+    frame, snapped, faces, crossings = _pass_surface(surface, size)
+    field = size_field(size)
+    band = finest_band(frame, snapped, faces, dict(crossings), MeshReport(size, frame.levels))
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys, band.keys)
+    key_bounds = range_bounds(frame, snapped, 4, frame.levels - field.coarse_depth)
+    index = BandIndex.from_pieces([band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1]))
+                                   for r in range(4)])
+    bounds = np.searchsorted(keys, key_bounds)
+    lattices = [range_lattice(frame, keys, levels, index, int(bounds[r]), int(bounds[r + 1])) for r in range(4)]
+    assert min(p.tets.shape[0] for p in lattices) > 0
+    coords, tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices, index)
+
+    vertices = number_vertices(octant_lattice_anchors(keys, frame),
+                               np.int64(1) << (frame.levels - levels.astype(np.int64)), prefix=band.stuffing.coords,
+                               eager=False)
+    want_inside = vertex_classes(vertices, band.stuffing.inside)
+    want = graded_tets(vertices, want_inside)
+
+    def named(coords, tets):
+        return sorted(tuple(sorted(map(tuple, coords[t].tolist()))) for t in tets)
+
+    assert named(coords, tets) == named(vertices.coords, want)
+    used = np.unique(want)
+    centres = used[used >= vertices.first_centre]
+    assert centres.size > 0
+    assert sorted(map(tuple, coords[first_centre:].tolist())) == sorted(map(tuple, vertices.coords[centres].tolist()))
+    by_point = {c: i for i, c in enumerate(map(tuple, coords.tolist()))}
+    assert all(inside[by_point[c]] == want_inside[v] for v, c in zip(used, map(tuple, vertices.coords[used].tolist())))
+    b = band.stuffing
+
+    def warps(coords, starts, ends, targets):
+        return {tuple(coords[v]): (tuple(coords[starts[e]]), tuple(coords[ends[e]]))
+                for v, e in enumerate(targets.tolist()) if e >= 0 and tuple(coords[v]) in by_point}
+
+    got = warps(coords, cuts.starts, cuts.ends, targets)
+    assert got == warps(b.coords, b.cuts.starts, b.cuts.ends, b.targets) and len(got) > 0
+    shared = np.intersect1d(pack_coords(lattices[0].coords), pack_coords(lattices[1].coords))
+    assert shared.size > 0
+    flipped = lattices[1].inside.copy()
+    flipped[np.flatnonzero(pack_coords(lattices[1].coords) == shared[0])[0]] ^= True
+    with pytest.raises(AssertionError, match="disagree on a shared lattice vertex"):
+        merge_range_lattices([lattices[0], dataclasses.replace(lattices[1], inside=flipped)], index)
 
 
 def test_a_part_thinner_than_the_lattice_is_refused_in_ranges():

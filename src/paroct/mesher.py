@@ -745,8 +745,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     docs/design.md), the pass runs again with ``mend``: every stuffed tet measured and other
     warps tried near the bad ones (_mend), as where the band changes level."""
     if not mend:
-        fresh = dataclasses.replace(report, stage_seconds=report.stage_seconds, warnings=list(report.warnings),
-                                    notes=list(report.notes))
+        fresh = report_snapshot(report)
     stages = _Stages(report, progress)
     h = field.size
     frame, snapped, faces, crossings, keys, levels, band = pass_leaves(surface, field, report, stages)
@@ -785,19 +784,41 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     assert cut_faces is not None  # cut_edges records each cut point's triangle
     del coords, tets, cuts, lattice_points, offsets
     result = _finish(points, out_tets, inside, targets, cut_faces, report, stages, surface, h)
-    if not mend and report.n_tets and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]:
-        for name in MeshReport.__dataclass_fields__:  # the caller's report, as it came in
-            setattr(report, name, getattr(fresh, name))
+    if not mend and outside_bound(report):
+        restore_report(report, fresh)  # the caller's report, as it came in
         return _mesh_at(surface, field, report, progress, mend=True)
-    if report.bad_tets:
-        report.warnings.append(f"{report.bad_tets} tets stayed outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
-                               "degrees after other warps were tried near them")
+    warn_bad_tets(report)
     lost = _losses(report, surface)
     advice, walls = "", None
     if lost:
         advice, walls = _walls_of_loss(surface, frame, snapped, faces, crossings, report)
         stages.done("features")
     return result, lost, advice, walls
+
+
+def outside_bound(report: MeshReport) -> bool:
+    """Whether a pass's measured dihedral angles leave DIHEDRAL_BOUND (it has tets)."""
+    return bool(report.n_tets) and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]
+
+
+def report_snapshot(report: MeshReport) -> MeshReport:
+    """A copy of report to restore_report from: its lists copied, stage_seconds shared (stage
+    times add up over the passes)."""
+    return dataclasses.replace(report, stage_seconds=report.stage_seconds, warnings=list(report.warnings),
+                               notes=list(report.notes))
+
+
+def restore_report(report: MeshReport, snapshot: MeshReport) -> None:
+    """Put every field of report back as report_snapshot took it, in place."""
+    for name in MeshReport.__dataclass_fields__:
+        setattr(report, name, getattr(snapshot, name))
+
+
+def warn_bad_tets(report: MeshReport) -> None:
+    """The warning for tets that mending (_mend) left outside DIHEDRAL_BOUND, if any."""
+    if report.bad_tets:
+        report.warnings.append(f"{report.bad_tets} tets stayed outside [{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}] "
+                               "degrees after other warps were tried near them")
 
 
 def pass_frame(h: float, surface: Surface, report: MeshReport) -> FatFrame:

@@ -10,10 +10,11 @@ octree (``octree_in_range``) the band and seeds of one ring of max_size octants 
 touching them (``touching_leaves``) and the band pieces holding those.  Pieces name points
 by lattice coordinates and cut points by their edge (``pack_coords``, ``edge_keys``), so they
 join with no shared numbering.  The finish (pinch repair, quality, compaction) runs on the
-merged mesh; mending by other warps, which needs the whole mesh, is not done per range (a
-range pass whose tets leave the bound says so).  The merged mesh is the one-process pass's,
-tet for tet and bit for bit (tests/test_partition.py), because every tie stuffing breaks is
-broken by lattice coordinates, not by vertex ids (sessions 41, 43), and each range's band and
+merged mesh; so does mending by other warps where a tet leaves the bound: the ranges' lattice
+tets (``range_lattice``) are joined (``merge_range_lattices``), stuffed and mended as one.
+The merged mesh is the one-process pass's, tet for tet and bit for bit
+(tests/test_partition.py), because every tie stuffing and mending break is broken by
+lattice coordinates, not by vertex ids (sessions 41, 43, 46), and each range's band and
 octree are the whole surface's there.
 """
 
@@ -32,14 +33,16 @@ from .errors import ParoctError
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
-                     _cells_around, _check_memory, _check_winding, _finish, _leaf_levels, _losses, _pass_report,
+                     _cells_around, _check_memory, _check_winding, _finish, _leaf_levels, _losses, _mend, _pass_report,
                      _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
-                     pass_frame, resolve_size, vertex_classes)
+                     outside_bound, pass_frame, report_snapshot, resolve_size, restore_report, vertex_classes,
+                     warn_bad_tets)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
 from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field
-from .stuffing import DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
+from .quality import OUTSIDE as OUTSIDE_BOUND
+from .stuffing import CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
 #: No lattice points: (0, 3) int64, what joins of no pieces start from.
@@ -382,7 +385,7 @@ def _first_of_each(keys: np.ndarray, name: str, *agreeing: np.ndarray) -> tuple[
         group_first = first[np.cumsum(starts) - 1]  # each occurrence's first, in sorted order
         for values in agreeing:
             if not np.array_equal(values[group_first], values[order]):
-                raise AssertionError(f"band pieces disagree on a shared {name}")
+                raise AssertionError(f"pieces disagree on a shared {name}")
     return ordered[starts], first
 
 
@@ -668,25 +671,7 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
     tets are emitted and stuffed.  Its cut edges are those its tets hold, plus those its
     vertices warp onto in touching cells.  around: touching_leaves(keys, levels, first, end),
     if the caller has it."""
-    if around is None:
-        around = touching_leaves(keys, levels, first, end)
-    before = int(np.searchsorted(around, first))
-    rows = np.concatenate([around[:before], np.arange(first, end, dtype=np.int64), around[before:]])
-    own = np.arange(before, before + end - first)
-    anchors = octant_lattice_anchors(keys[rows], frame)
-    sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
-    corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
-    in_range = band.vertices_at(corners)  # local vertex i < len(in_range) is band vertex in_range[i]
-    vertices = number_vertices(anchors, sides, prefix=band.coords[in_range], eager=False)
-    inside = vertex_classes(vertices, band.inside[in_range])
-    # A touching leaf may have band corners in pieces the range does not read, and spread a
-    # wrong class to the corners it shares; the range's own leaves, whose band corners are
-    # all read, spread theirs last (a leaf with no cut edge gives every sharer one class).
-    _spread_leaf_classes(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids, inside,
-                         in_range.shape[0])
-    own_vertices = LeafVertices(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids,
-                                vertices.coords, vertices.first_centre)
-    tets = graded_tets(own_vertices, inside)
+    vertices, inside, tets, in_range = _range_lattice_tets(frame, keys, levels, band, first, end, around)
     cuts, cut_at, targets = _range_cuts(band, in_range, vertices.coords, tets, inside)
     points, out_tets, _ = stuff(frame.to_space(vertices.coords), vertices.coords, tets, inside, cuts, targets,
                                 first_centre=vertices.first_centre)
@@ -706,6 +691,93 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
     cut_edges_used = cut_at[used[n:]]
     return RangeMesh(points[used], new_id[out_tets].astype(np.int32), pack_coords(vertices.coords[lattice]),
                      inside[lattice], target_keys, target_faces, band.keys[cut_edges_used], band.faces[cut_edges_used])
+
+
+def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int, end: int,
+                        around: np.ndarray | None) -> tuple[LeafVertices, np.ndarray, np.ndarray, np.ndarray]:
+    """mesh_range's lattice: (the vertices of the range's own and touching leaves, their
+    classes (V,), the own leaves' lattice tets with an inside vertex (T, 4) int32, in_range:
+    local vertex i < len(in_range) is band vertex in_range[i])."""
+    if around is None:
+        around = touching_leaves(keys, levels, first, end)
+    before = int(np.searchsorted(around, first))
+    rows = np.concatenate([around[:before], np.arange(first, end, dtype=np.int64), around[before:]])
+    own = np.arange(before, before + end - first)
+    anchors = octant_lattice_anchors(keys[rows], frame)
+    sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
+    corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+    in_range = band.vertices_at(corners)
+    vertices = number_vertices(anchors, sides, prefix=band.coords[in_range], eager=False)
+    inside = vertex_classes(vertices, band.inside[in_range])
+    # A touching leaf may have band corners in pieces the range does not read, and spread a
+    # wrong class to the corners it shares; the range's own leaves, whose band corners are
+    # all read, spread theirs last (a leaf with no cut edge gives every sharer one class).
+    _spread_leaf_classes(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids, inside,
+                         in_range.shape[0])
+    own_vertices = LeafVertices(vertices.corner_ids[own], vertices.split_row[own], vertices.split_ids,
+                                vertices.coords, vertices.first_centre)
+    return vertices, inside, graded_tets(own_vertices, inside), in_range
+
+
+@dataclass(frozen=True)
+class RangeLattice:
+    """One range's own lattice tets, for stuffing and mending them with every other range's
+    as one mesh (merge_range_lattices).  coords (W, 3) int64: the lattice coordinates of their
+    vertices; inside (W,) bool; centre (W,) bool: a face centre that is no leaf's corner
+    (number_vertices numbers those last, and the quad rule puts them last on template
+    faces); tets (T, 4) int32 into coords, as graded_tets gives them."""
+
+    coords: np.ndarray
+    inside: np.ndarray
+    centre: np.ndarray
+    tets: np.ndarray
+
+
+def range_lattice(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int, end: int,
+                  around: np.ndarray | None = None) -> RangeLattice:
+    """The lattice tets of leaves keys[first:end] (with an inside vertex), numbered and
+    classified as mesh_range numbers and classifies them, not stuffed.  Arguments as for
+    mesh_range."""
+    vertices, inside, tets, _ = _range_lattice_tets(frame, keys, levels, band, first, end, around)
+    used = np.zeros(vertices.coords.shape[0], dtype=bool)
+    used[tets.ravel()] = True
+    ids = np.flatnonzero(used)
+    return RangeLattice(vertices.coords[ids], inside[ids], ids >= vertices.first_centre,
+                        np.searchsorted(ids, tets).astype(np.int32))
+
+
+def merge_range_lattices(pieces: Sequence[RangeLattice],
+                         band: BandIndex) -> tuple[np.ndarray, np.ndarray, np.ndarray, CutEdges, np.ndarray, int]:
+    """The ranges' lattice tets as one lattice to stuff: (coords (V, 3), tets (T, 4) int32,
+    inside (V,), cuts, targets (V,) into cuts, first_centre), the arguments stuff takes.
+    Each vertex once, the leaf corners first and the face centres that are no leaf's corner
+    after them (first_centre: the first of those), each part by coordinates; the cut edges
+    those of the joined tets (collect_cut_edges), their cut points and triangles and the
+    warps from band (BandIndex.from_pieces of every range's band piece).  Pieces that
+    disagree on a shared vertex are an AssertionError."""
+    coords_all = np.concatenate([np.zeros((0, 3), np.int64)] + [p.coords for p in pieces])
+    centre_all = np.concatenate([np.zeros(0, bool)] + [p.centre for p in pieces])
+    inside_all = np.concatenate([np.zeros(0, bool)] + [p.inside for p in pieces])
+    vertex_keys, first = _first_of_each(pack_coords(coords_all), "lattice vertex", centre_all, inside_all)
+    order = np.argsort(centre_all[first], kind="stable")  # corners first, each part by key
+    new_id = np.empty(order.shape[0], dtype=np.int64)
+    new_id[order] = np.arange(order.shape[0])
+    coords, inside = coords_all[first[order]], inside_all[first[order]]
+    tets = np.concatenate([np.zeros((0, 4), np.int32)] + [
+        new_id[np.searchsorted(vertex_keys, pack_coords(p.coords))][p.tets].astype(np.int32) for p in pieces])
+    starts, ends, directions, *table = collect_cut_edges(tets, inside, coords)
+    cut_keys = edge_keys(coords[starts], coords[ends])
+    at = band.edges_at(cut_keys)
+    cuts = CutEdges(starts, ends, directions, band.fracs[at], band.points[at], tuple(table), band.faces[at])
+    in_band, found = sorted_lookup(band.vertex_keys, pack_coords(coords))
+    target_keys = np.where(found, band.target_keys[np.where(found, in_band, 0)], -1)
+    by_key = np.argsort(cut_keys)
+    edge_at, held = sorted_lookup(cut_keys[by_key], target_keys)
+    warped = target_keys >= 0
+    if not held[warped].all():
+        raise AssertionError(f"{int((~held[warped]).sum())} vertices warp onto edges of no range's tets")
+    targets = np.where(warped, by_key[np.where(held, edge_at, 0)], -1).astype(np.int64)
+    return coords, tets, inside, cuts, targets, int(np.count_nonzero(~centre_all[first]))
 
 
 def _range_cuts(band: BandIndex, in_range: np.ndarray, coords: np.ndarray, tets: np.ndarray,
@@ -800,11 +872,12 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     an executor's map (concurrent.futures.ProcessPoolExecutor().map, a Dask client's map and
     gather) runs them side by side: the functions and their arguments pickle.
 
-    The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``
-    where that pass needs no mending (its tets inside [10.7, 164.8] degrees at once, as on
-    every corpus part at diag/40 and /80), in another vertex order.  Refinement near thin
-    walls, curvature and the other asks are not done per range yet; a pass whose tets leave
-    the bound warns (mending needs the whole mesh)."""
+    The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``,
+    in another vertex order.  Where a tet leaves [10.7, 164.8] degrees, mesh() stuffs again and
+    mends by other warps (bunny at diag/30, uniform); so do the ranges, their lattice tets
+    (range_lattice) joined into one lattice (merge_range_lattices): the mending is not per
+    range yet.  Refinement near thin walls, curvature and the other asks are not done per
+    range yet either."""
     if isinstance(n_parts, (bool, np.bool_)) or not isinstance(n_parts, (int, np.integer)) or n_parts < 1:
         raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
     if mapper is not None and not callable(mapper):
@@ -838,15 +911,31 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
-    pieces = list(run(partial(_mesh_range_task, frame, keys, levels, key_bounds, band), bounds[:-1].tolist(),
+    pieces = list(run(partial(_range_task, mesh_range, frame, keys, levels, key_bounds, band), bounds[:-1].tolist(),
                       bounds[1:].tolist()))
     stages.done("stuff")
     points, tets, inside, targets, cut_faces = merge_ranges(pieces)
+    fresh = report_snapshot(report)
     result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
-    if report.n_tets and not DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]:
-        report.warnings.append(f"dihedral angles {report.min_dihedral:.4g} .. {report.max_dihedral:.4g} leave "
-                               f"[{DIHEDRAL_BOUND[0]}, {DIHEDRAL_BOUND[1]}]: mending by other warps needs the whole "
-                               "mesh and is not done in ranges")
+    if outside_bound(report):
+        # As mesh(): stuffed again with every tet measured and other warps tried near the bad
+        # ones, here over the ranges' lattice tets joined into one lattice.
+        restore_report(report, fresh)
+        lattices = list(run(partial(_range_task, range_lattice, frame, keys, levels, key_bounds, band),
+                            bounds[:-1].tolist(), bounds[1:].tolist()))
+        coords, lattice_tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices,
+                                                                                         BandIndex.from_pieces(band))
+        lattice_points = frame.to_space(coords)
+        points, tets, offsets = stuff(lattice_points, coords, lattice_tets, inside, cuts, targets, flat_ok=True,
+                                      first_centre=first_centre)
+        stages.done("stuff")
+        points, tets, targets, offsets, flags = _mend(lattice_points, coords, first_centre, lattice_tets, inside,
+                                                      cuts, targets, points, tets, offsets)
+        report.bad_tets = int(np.count_nonzero((flags & OUTSIDE_BOUND) != 0))
+        stages.done("warps")
+        assert cuts.faces is not None  # taken from the band
+        result = _finish(points, tets, inside, targets, cuts.faces, report, stages, surface, h)
+        warn_bad_tets(report)
     lost = _losses(report, surface)
     if lost:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
@@ -854,13 +943,14 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     return result
 
 
-def _mesh_range_task(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_bounds: np.ndarray,
-                     band: Sequence[BandPiece], first: int, end: int) -> RangeMesh:
-    """mesh_range of leaves first..end-1 from the band pieces it reads (band_pieces_for of
-    band, the pieces of the key ranges key_bounds): one range's task in mesh_in_ranges."""
+def _range_task(task: Callable, frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_bounds: np.ndarray,
+                band: Sequence[BandPiece], first: int, end: int):
+    """task (mesh_range or range_lattice) of leaves first..end-1 from the band pieces it reads
+    (band_pieces_for of band, the pieces of the key ranges key_bounds): one range's task in
+    mesh_in_ranges."""
     around = touching_leaves(keys, levels, first, end)
     read = band_pieces_for(keys, levels, np.concatenate([np.arange(first, end), around]), frame.levels, key_bounds)
-    return mesh_range(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end, around)
+    return task(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end, around)
 
 
 def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
@@ -869,7 +959,7 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
     return int(np.unique(np.concatenate(keys)).shape[0]) if keys else 0
 
 
-__all__ = ["BandIndex", "BandPiece", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
+__all__ = ["BandIndex", "BandPiece", "RangeLattice", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
            "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges",
-           "merge_band_pieces", "merge_ranges", "mesh_in_ranges", "mesh_range", "octree_in_range", "pack_coords",
-           "range_bounds", "touching_leaves", "unresolved_cuts"]
+           "merge_band_pieces", "merge_range_lattices", "merge_ranges", "mesh_in_ranges", "mesh_range",
+           "octree_in_range", "pack_coords", "range_bounds", "range_lattice", "touching_leaves", "unresolved_cuts"]
