@@ -388,8 +388,9 @@ def test_ranges_run_side_by_side_in_other_processes():
     calls = []
 
     def recording_map(function, *iterables):
-        calls.append(len(iterables[0]))
-        return map(function, *iterables)
+        items = [list(i) for i in iterables]  # a stage may hand its tasks over as they are made
+        calls.append(len(items[0]))
+        return map(function, *items)
 
     alone = mesh_in_ranges(surface, size, n_parts=3, mapper=recording_map)
     assert calls == [3, 3, 3]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numba as nb
 import numpy as np
@@ -620,6 +620,21 @@ class BandIndex:
         marked[at[found]] = True
         return np.flatnonzero(marked)
 
+    def near(self, corners: np.ndarray) -> BandIndex:
+        """The part of the index a range whose leaves have these corners (K, 3) reads: the
+        band vertices among them, the cut edges with both ends among those (every mixed edge
+        of its tets) and the edges those vertices warp onto."""
+        v = self.vertices_at(corners)
+        vertex_keys = self.vertex_keys[v]
+        held = sorted_lookup(vertex_keys, pack_coords(self.starts))[1] & sorted_lookup(vertex_keys,
+                                                                                        pack_coords(self.ends))[1]
+        targets = self.target_keys[v]
+        held[self.edges_at(targets[targets >= 0])] = True
+        e = np.flatnonzero(held)
+        return BandIndex(vertex_keys, self.coords[v], self.inside[v], self.target_keys[v], self.keys[e],
+                         self.starts[e], self.ends[e], self.directions[e], self.fracs[e], self.points[e],
+                         self.faces[e])
+
     def edges_at(self, keys: np.ndarray) -> np.ndarray:
         """The index of the cut edge of each key (K,); AssertionError if one is none."""
         at, found = sorted_lookup(self.keys, keys)
@@ -911,8 +926,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
-    pieces = list(run(partial(_range_task, mesh_range, frame, keys, levels, key_bounds, band), bounds[:-1].tolist(),
-                      bounds[1:].tolist()))
+    whole_band = BandIndex.from_pieces(band)
+    pieces = list(run(partial(_range_task, mesh_range, frame), range_shares(frame, keys, levels, whole_band, bounds)))
     stages.done("stuff")
     points, tets, inside, targets, cut_faces = merge_ranges(pieces)
     fresh = report_snapshot(report)
@@ -921,10 +936,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         # As mesh(): stuffed again with every tet measured and other warps tried near the bad
         # ones, here over the ranges' lattice tets joined into one lattice.
         restore_report(report, fresh)
-        lattices = list(run(partial(_range_task, range_lattice, frame, keys, levels, key_bounds, band),
-                            bounds[:-1].tolist(), bounds[1:].tolist()))
-        coords, lattice_tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices,
-                                                                                         BandIndex.from_pieces(band))
+        lattices = list(run(partial(_range_task, range_lattice, frame),
+                            range_shares(frame, keys, levels, whole_band, bounds)))
+        coords, lattice_tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices, whole_band)
         lattice_points = frame.to_space(coords)
         points, tets, offsets = stuff(lattice_points, coords, lattice_tets, inside, cuts, targets, flat_ok=True,
                                       first_centre=first_centre)
@@ -943,14 +957,41 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     return result
 
 
-def _range_task(task: Callable, frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_bounds: np.ndarray,
-                band: Sequence[BandPiece], first: int, end: int):
-    """task (mesh_range or range_lattice) of leaves first..end-1 from the band pieces it reads
-    (band_pieces_for of band, the pieces of the key ranges key_bounds): one range's task in
+@dataclass(frozen=True)
+class RangeShare:
+    """What one range's tets task reads (range_shares), and no more: keys, levels (N,) its own
+    leaves, keys[first:end], and those touching them (touching_leaves: around, indices into
+    these), sorted; band: the part of the band their corners read (BandIndex.near)."""
+
+    keys: np.ndarray
+    levels: np.ndarray
+    first: int
+    end: int
+    around: np.ndarray
+    band: BandIndex
+
+
+def range_shares(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex,
+                 leaf_bounds: np.ndarray) -> Iterator[RangeShare]:
+    """The share of each range of leaves leaf_bounds[r]..leaf_bounds[r + 1] - 1 of the octree
+    (keys, levels), one after another: a task sent its share (to another process, a Dask
+    worker) is not sent the whole octree and band.  band: BandIndex.from_pieces of every
+    range's band piece."""
+    for first, end in zip(leaf_bounds[:-1].tolist(), leaf_bounds[1:].tolist()):
+        around = touching_leaves(keys, levels, first, end)
+        rows = np.sort(np.concatenate([np.arange(first, end), around]))
+        before = int(np.searchsorted(around, first))
+        anchors = octant_lattice_anchors(keys[rows], frame)
+        sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
+        corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+        local_around = np.concatenate([np.arange(before), np.arange(before + end - first, rows.shape[0])])
+        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around, band.near(corners))
+
+
+def _range_task(task: Callable, frame: FatFrame, share: RangeShare):
+    """task (mesh_range or range_lattice) of one range's share: one range's task in
     mesh_in_ranges."""
-    around = touching_leaves(keys, levels, first, end)
-    read = band_pieces_for(keys, levels, np.concatenate([np.arange(first, end), around]), frame.levels, key_bounds)
-    return task(frame, keys, levels, BandIndex.from_pieces([band[i] for i in read]), first, end, around)
+    return task(frame, share.keys, share.levels, share.band, share.first, share.end, share.around)
 
 
 def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
@@ -962,4 +1003,5 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
 __all__ = ["BandIndex", "BandPiece", "RangeLattice", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
            "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges",
            "merge_band_pieces", "merge_range_lattices", "merge_ranges", "mesh_in_ranges", "mesh_range",
-           "octree_in_range", "pack_coords", "range_bounds", "range_lattice", "touching_leaves", "unresolved_cuts"]
+           "octree_in_range", "pack_coords", "range_bounds", "range_lattice", "range_shares", "RangeShare",
+           "touching_leaves", "unresolved_cuts"]
