@@ -754,3 +754,13 @@ def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, basis: np
         if any(lo[0] <= a <= hi[0] and lo[1] <= b <= hi[1] for a, b in rows):
             out.append(f)
     return out
+
+
+def owned_ids(keys, owners):
+    """partition.owned_ids by a dict: every distinct (owner, key) pair, sorted, numbered in
+    that order; returns (the ids of each piece's keys, the count)."""
+    pairs = sorted({(int(o), int(k)) for piece_keys, piece_owners in zip(keys, owners)
+                    for k, o in zip(piece_keys, piece_owners)})
+    index = {pair: i for i, pair in enumerate(pairs)}
+    return [[index[(int(o), int(k))] for k, o in zip(piece_keys, piece_owners)]
+            for piece_keys, piece_owners in zip(keys, owners)], len(pairs)

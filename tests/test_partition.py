@@ -175,6 +175,47 @@ def test_joined_range_lattices_are_the_whole_octrees_lattice():
         merge_range_lattices([lattices[0], dataclasses.replace(lattices[1], inside=flipped)], index)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_owned_ids_number_each_key_once_by_owner_then_key(seed):
+    """owned_ids against a dict of every (owner, key) pair: pieces with repeated keys, keys
+    shared between pieces, owners with no key, an empty piece."""
+    from paroct.partition import owned_ids
+
+    rng = np.random.default_rng(seed)
+    n_ranges = int(rng.integers(1, 7))
+    universe = np.unique(rng.integers(0, 1 << 40, 300))
+    owner_of = rng.integers(0, n_ranges, universe.shape[0])  # the owner is a function of the key
+    pieces = [rng.choice(universe, size=int(rng.integers(0, 120))) for _ in range(int(rng.integers(1, 6)))]
+    pieces.append(np.zeros(0, dtype=np.int64))
+    owners = [owner_of[np.searchsorted(universe, k)] for k in pieces]
+    ids, count = owned_ids(pieces, owners, n_ranges)
+    want, want_count = naive.owned_ids(pieces, owners)
+    assert count == want_count and all(got.tolist() == w for got, w in zip(ids, want))
+
+
+def test_every_leaf_anchor_is_owned_by_the_leaf_range_and_packed_points_unpack():
+    """point_owners: the lattice point at a leaf's minimum corner belongs to the range holding
+    the leaf (its key is that of the finest cell there); unpack_coords inverts pack_coords."""
+    from paroct.mesher import MeshReport, X_AXIS_DIRECTION, finest_band, octree_around_band
+    from paroct.octree import octant_lattice_anchors
+    from paroct.partition import point_owners, range_bounds, unpack_coords
+    from paroct.sizing import size_field
+
+    surface = paroct.load_surface(DATA / "bunny.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 25
+    frame, snapped, faces, crossings = _pass_surface(surface, size)
+    field = size_field(size)
+    band = finest_band(frame, snapped, faces, dict(crossings), MeshReport(size, frame.levels))
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys, band.keys)
+    key_bounds = range_bounds(frame, snapped, 5, frame.levels - field.coarse_depth)
+    leaf_range = np.searchsorted(key_bounds, keys, side="right") - 1
+    anchors = octant_lattice_anchors(keys, frame)
+    assert np.array_equal(point_owners(frame, anchors, key_bounds), leaf_range) and len(set(leaf_range.tolist())) > 2
+    far = (np.int64(1) << frame.levels) * np.ones((1, 3), dtype=np.int64)  # a corner of the frame's far faces
+    assert point_owners(frame, far, key_bounds)[0] == 4
+    assert np.array_equal(unpack_coords(pack_coords(anchors)), anchors)
+
+
 def test_a_part_thinner_than_the_lattice_is_refused_in_ranges():
     surface = paroct.load_surface(manifold3d.Manifold.cube([1.0, 1.0, 0.01]))
     with pytest.raises(paroct.ParoctError, match="no tets"):

@@ -828,48 +828,98 @@ def _range_cuts(band: BandIndex, in_range: np.ndarray, coords: np.ndarray, tets:
     return cuts, all_at, targets
 
 
-def merge_ranges(pieces: list[RangeMesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The pieces as one stuffed mesh: each lattice vertex once (by its coordinates), then
-    each cut point once (by its edge), the cut points of the edges the vertices warp onto
-    included (NaN where no tet uses one): (points (L + C, 3), tets (M, 4) int32, inside (L,),
-    targets (L,) into the C cut points, cut_faces (C,) int32 the triangle of each).  A vertex
-    or cut point the pieces place differently is an AssertionError: stuffing in ranges must
-    agree where they meet."""
-    all_keys = np.concatenate([p.vertex_keys for p in pieces])
-    _, first, vertex_of = np.unique(all_keys, return_index=True, return_inverse=True)
-    n_vertices = first.shape[0]
-    inside_all = np.concatenate([p.inside for p in pieces])
-    inside = inside_all[first]
-    if not np.array_equal(inside[vertex_of], inside_all):
-        raise AssertionError("ranges classify a shared lattice vertex differently")
-    target_keys = np.concatenate([p.target_keys for p in pieces])
-    target_faces = np.concatenate([p.target_faces for p in pieces])
-    cut_keys = np.concatenate([p.cut_keys for p in pieces])
-    warped = target_keys >= 0
-    edges, edge_first = np.unique(np.concatenate([cut_keys, target_keys[warped]]), return_index=True)
-    cut_faces = np.concatenate([np.concatenate([p.cut_faces for p in pieces]), target_faces[warped]])[edge_first]
-    if not np.array_equal(target_keys[first][vertex_of], target_keys):
-        raise AssertionError("ranges warp a shared lattice vertex differently")
+def unpack_coords(keys: np.ndarray) -> np.ndarray:
+    """Lattice coordinates (N, 3) int64 of pack_coords' keys (N,) (its inverse)."""
+    keys = np.asarray(keys, dtype=np.int64)
+    mask = (np.int64(1) << _COORD_BITS) - 1
+    return np.stack([keys & mask, (keys >> _COORD_BITS) & mask, keys >> (2 * _COORD_BITS)], axis=1)
+
+
+def point_owners(frame: FatFrame, coords: np.ndarray, key_bounds: np.ndarray) -> np.ndarray:
+    """The range (N,) int64 owning each lattice point (coords (N, 3)) among the key ranges
+    key_bounds (range_bounds): the one whose keys hold the finest cell anchored at the point
+    (moved into the frame where the point is on its far faces).  A cut point's owner is that
+    of the lattice point at half its edge key's coordinates (edge_keys: twice the midpoint)."""
+    top = (np.int64(1) << frame.levels) - 1
+    cells = np.clip(np.asarray(coords, dtype=np.int64), 0, top) << (MAX_LEVEL - frame.levels)
+    return np.searchsorted(key_bounds, morton_keys(np.ascontiguousarray(cells)), side="right") - 1
+
+
+def owned_ids(keys: Sequence[np.ndarray], owners: Sequence[np.ndarray], n_ranges: int) -> tuple[list[np.ndarray], int]:
+    """Ids 0..K-1 of the K distinct keys that pieces hold (keys[i] (N_i,) int64, owners[i]
+    (N_i,): the range owning each, a function of the key), numbered with no sort of them all:
+    each piece sends its keys to their owners, each owner numbers the distinct keys it
+    receives in ascending order, an exclusive scan of the owners' counts gives each owner its
+    first id, and each piece reads its keys' ids back from their owners.  Returns (the ids of
+    each piece's keys, K).  (Here a send is a list append; between workers it is one
+    exchange each way, and the scan a reduction of one count a range.)"""
+    received: list[list[np.ndarray]] = [[] for _ in range(n_ranges)]
+    grouped = []
+    for piece_keys, piece_owners in zip(keys, owners):
+        order = np.argsort(piece_owners, kind="stable")
+        bounds = np.searchsorted(piece_owners[order], np.arange(n_ranges + 1))
+        to = np.flatnonzero(np.diff(bounds))
+        for r in to:
+            received[r].append(piece_keys[order[bounds[r]:bounds[r + 1]]])
+        grouped.append((order, bounds, to))
+    owned = [np.unique(np.concatenate(part)) if part else np.zeros(0, dtype=np.int64) for part in received]
+    first = np.concatenate([[0], np.cumsum([o.shape[0] for o in owned])]).astype(np.int64)
+    ids = []
+    for piece_keys, (order, bounds, to) in zip(keys, grouped):
+        piece_ids = np.empty(piece_keys.shape[0], dtype=np.int64)
+        for r in to:
+            rows = order[bounds[r]:bounds[r + 1]]
+            piece_ids[rows] = first[r] + np.searchsorted(owned[r], piece_keys[rows])
+        ids.append(piece_ids)
+    return ids, int(first[-1])
+
+
+def merge_ranges(pieces: list[RangeMesh], frame: FatFrame,
+                 key_bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces (the ranges of key_bounds, in order) as one stuffed mesh: each lattice vertex
+    once, then each cut point once (by its edge), the cut points of the edges the vertices
+    warp onto included (NaN where no tet uses one): (points (L + C, 3), tets (M, 4) int32,
+    inside (L,), targets (L,) into the C cut points, cut_faces (C,) int32 the triangle of
+    each).  Vertices and cut points are numbered by the ranges that own them (point_owners,
+    owned_ids), in range order and by key within a range.  A vertex or cut point the pieces
+    place, classify or warp differently is an AssertionError: stuffing in ranges must agree
+    where they meet."""
+    n_ranges = key_bounds.shape[0] - 1
+    vertex_ids, n_vertices = owned_ids([p.vertex_keys for p in pieces],
+                                       [point_owners(frame, unpack_coords(p.vertex_keys), key_bounds) for p in pieces],
+                                       n_ranges)
+    # A piece's edges: those of its cut points, then those its vertices warp onto.
+    edges = [np.concatenate([p.cut_keys, p.target_keys[p.target_keys >= 0]]) for p in pieces]
+    edge_ids, n_edges = owned_ids(edges, [point_owners(frame, unpack_coords(e) >> 1, key_bounds) for e in edges],
+                                  n_ranges)
+    inside = np.zeros(n_vertices, dtype=bool)
     targets = np.full(n_vertices, -1, dtype=np.int64)
-    targets[vertex_of[warped]] = np.searchsorted(edges, target_keys[warped])
-    points = np.full((n_vertices + edges.shape[0], 3), np.nan)
-    lattice = np.concatenate([p.points[: p.vertex_keys.shape[0]] for p in pieces])
-    points[:n_vertices] = lattice[first]
-    if not np.array_equal(lattice, points[vertex_of]):
-        raise AssertionError("ranges place a shared lattice vertex differently")
-    tets, start = [], 0
-    for p in pieces:
-        n = p.vertex_keys.shape[0]
-        cut_of = n_vertices + np.searchsorted(edges, p.cut_keys)
-        cut_points = p.points[n:]
-        seen = ~np.isnan(points[cut_of, 0])
-        if not np.array_equal(points[cut_of[seen]], cut_points[seen]):
+    points = np.full((n_vertices + n_edges, 3), np.nan)
+    cut_faces = np.full(n_edges, -1, dtype=np.int32)
+    piece_targets = []
+    for p, v, e in zip(pieces, vertex_ids, edge_ids):
+        n, n_cut = p.vertex_keys.shape[0], p.cut_keys.shape[0]
+        warped = p.target_keys >= 0
+        t = np.full(n, -1, dtype=np.int64)
+        t[warped] = e[n_cut:]
+        piece_targets.append(t)
+        inside[v], targets[v], points[v] = p.inside, t, p.points[:n]
+        points[n_vertices + e[:n_cut]] = p.points[n:]
+        cut_faces[e[:n_cut]], cut_faces[e[n_cut:]] = p.cut_faces, p.target_faces[warped]
+    tets = []
+    for p, v, e, t in zip(pieces, vertex_ids, edge_ids, piece_targets):
+        n, n_cut = p.vertex_keys.shape[0], p.cut_keys.shape[0]
+        if not np.array_equal(inside[v], p.inside):
+            raise AssertionError("ranges classify a shared lattice vertex differently")
+        if not np.array_equal(targets[v], t):
+            raise AssertionError("ranges warp a shared lattice vertex differently")
+        if not np.array_equal(points[v], p.points[:n]):
+            raise AssertionError("ranges place a shared lattice vertex differently")
+        if not np.array_equal(points[n_vertices + e[:n_cut]], p.points[n:]):
             raise AssertionError("ranges place a shared cut point differently")
-        points[cut_of] = cut_points
-        tets.append(np.concatenate([vertex_of[start:start + n], cut_of])[p.tets].astype(np.int32))
-        start += n
+        tets.append(np.concatenate([v, n_vertices + e[:n_cut]])[p.tets].astype(np.int32))
     return (points, np.concatenate(tets) if tets else np.zeros((0, 4), dtype=np.int32), inside, targets,
-            cut_faces.astype(np.int32))
+            cut_faces)
 
 
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
@@ -929,7 +979,7 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     whole_band = BandIndex.from_pieces(band)
     pieces = list(run(partial(_range_task, mesh_range, frame), range_shares(frame, keys, levels, whole_band, bounds)))
     stages.done("stuff")
-    points, tets, inside, targets, cut_faces = merge_ranges(pieces)
+    points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds)
     fresh = report_snapshot(report)
     result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
     if outside_bound(report):
@@ -1003,5 +1053,5 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
 __all__ = ["BandIndex", "BandPiece", "RangeLattice", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
            "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges",
            "merge_band_pieces", "merge_range_lattices", "merge_ranges", "mesh_in_ranges", "mesh_range",
-           "octree_in_range", "pack_coords", "range_bounds", "range_lattice", "range_shares", "RangeShare",
-           "touching_leaves", "unresolved_cuts"]
+           "octree_in_range", "owned_ids", "pack_coords", "point_owners", "range_bounds", "range_lattice",
+           "range_shares", "RangeShare", "touching_leaves", "unpack_coords", "unresolved_cuts"]
