@@ -976,8 +976,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
-    whole_band = BandIndex.from_pieces(band)
-    pieces = list(run(partial(_range_task, mesh_range, frame), range_shares(frame, keys, levels, whole_band, bounds)))
+    pieces = list(run(partial(_range_task, mesh_range, frame),
+                      range_shares(frame, keys, levels, key_bounds, band, bounds)))
     stages.done("stuff")
     points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds)
     fresh = report_snapshot(report)
@@ -987,8 +987,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         # ones, here over the ranges' lattice tets joined into one lattice.
         restore_report(report, fresh)
         lattices = list(run(partial(_range_task, range_lattice, frame),
-                            range_shares(frame, keys, levels, whole_band, bounds)))
-        coords, lattice_tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices, whole_band)
+                            range_shares(frame, keys, levels, key_bounds, band, bounds)))
+        coords, lattice_tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices,
+                                                                                         BandIndex.from_pieces(band))
         lattice_points = frame.to_space(coords)
         points, tets, offsets = stuff(lattice_points, coords, lattice_tets, inside, cuts, targets, flat_ok=True,
                                       first_centre=first_centre)
@@ -1021,21 +1022,24 @@ class RangeShare:
     band: BandIndex
 
 
-def range_shares(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex,
-                 leaf_bounds: np.ndarray) -> Iterator[RangeShare]:
+def range_shares(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_bounds: np.ndarray,
+                 band: Sequence[BandPiece], leaf_bounds: np.ndarray) -> Iterator[RangeShare]:
     """The share of each range of leaves leaf_bounds[r]..leaf_bounds[r + 1] - 1 of the octree
     (keys, levels), one after another: a task sent its share (to another process, a Dask
-    worker) is not sent the whole octree and band.  band: BandIndex.from_pieces of every
-    range's band piece."""
+    worker) is not sent the whole octree and band.  band: the band pieces of the key ranges
+    key_bounds; a range's part is taken from the pieces holding its finest leaves
+    (band_pieces_for), so no index of the whole band is built."""
     for first, end in zip(leaf_bounds[:-1].tolist(), leaf_bounds[1:].tolist()):
         around = touching_leaves(keys, levels, first, end)
         rows = np.sort(np.concatenate([np.arange(first, end), around]))
+        read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
         before = int(np.searchsorted(around, first))
         anchors = octant_lattice_anchors(keys[rows], frame)
         sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
         corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
         local_around = np.concatenate([np.arange(before), np.arange(before + end - first, rows.shape[0])])
-        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around, band.near(corners))
+        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around,
+                         BandIndex.from_pieces([band[i] for i in read]).near(corners))
 
 
 def _range_task(task: Callable, frame: FatFrame, share: RangeShare):
