@@ -103,6 +103,24 @@ def test_ranges_cut_through_transition_leaves_and_share_points():
     assert sum(p.tets.shape[0] for p in pieces) > 0
 
 
+def _graded_pass_in_ranges(divisions, n_parts):
+    """bunny's graded pass at diag/divisions (one process: finest_band, octree_around_band) and
+    n_parts key ranges of its max_size octants: (frame, snapped, faces, band, keys, levels,
+    key_bounds)."""
+    from paroct.mesher import MeshReport, X_AXIS_DIRECTION, finest_band, octree_around_band
+    from paroct.partition import range_bounds
+    from paroct.sizing import size_field
+
+    surface = paroct.load_surface(DATA / "bunny.stl")
+    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / divisions
+    frame, snapped, faces, crossings = _pass_surface(surface, size)
+    field = size_field(size)
+    band = finest_band(frame, snapped, faces, dict(crossings), MeshReport(size, frame.levels))
+    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys, band.keys)
+    return frame, snapped, faces, band, keys, levels, range_bounds(frame, snapped, n_parts,
+                                                                   frame.levels - field.coarse_depth)
+
+
 @pytest.mark.parametrize("n_parts", [1, 3])
 def test_a_range_pass_that_needs_mending_mends_as_mesh_does(n_parts):
     """bunny at diag/30, uniform: a stuffed tet of 10.48 degrees, which mesh() mends by other
@@ -124,18 +142,11 @@ def test_joined_range_lattices_are_the_whole_octrees_lattice():
     classes and warps of the one pass, named by coordinates, the face centres that are no
     leaf's corner numbered last; a piece that classes a shared vertex otherwise is refused."""
     from paroct.lattice import graded_tets, number_vertices
-    from paroct.mesher import MeshReport, X_AXIS_DIRECTION, finest_band, octree_around_band, vertex_classes
+    from paroct.mesher import vertex_classes
     from paroct.octree import octant_lattice_anchors
-    from paroct.partition import BandIndex, band_in_range, merge_range_lattices, range_bounds, range_lattice
-    from paroct.sizing import size_field
+    from paroct.partition import BandIndex, band_in_range, merge_range_lattices, range_lattice
 
-    surface = paroct.load_surface(DATA / "bunny.stl")
-    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 20
-    frame, snapped, faces, crossings = _pass_surface(surface, size)
-    field = size_field(size)
-    band = finest_band(frame, snapped, faces, dict(crossings), MeshReport(size, frame.levels))
-    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys, band.keys)
-    key_bounds = range_bounds(frame, snapped, 4, frame.levels - field.coarse_depth)
+    frame, snapped, faces, band, keys, levels, key_bounds = _graded_pass_in_ranges(20, 4)
     index = BandIndex.from_pieces([band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1]))
                                    for r in range(4)])
     bounds = np.searchsorted(keys, key_bounds)
@@ -196,18 +207,10 @@ def test_owned_ids_number_each_key_once_by_owner_then_key(seed):
 def test_every_leaf_anchor_is_owned_by_the_leaf_range_and_packed_points_unpack():
     """point_owners: the lattice point at a leaf's minimum corner belongs to the range holding
     the leaf (its key is that of the finest cell there); unpack_coords inverts pack_coords."""
-    from paroct.mesher import MeshReport, X_AXIS_DIRECTION, finest_band, octree_around_band
     from paroct.octree import octant_lattice_anchors
-    from paroct.partition import point_owners, range_bounds, unpack_coords
-    from paroct.sizing import size_field
+    from paroct.partition import point_owners, unpack_coords
 
-    surface = paroct.load_surface(DATA / "bunny.stl")
-    size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 25
-    frame, snapped, faces, crossings = _pass_surface(surface, size)
-    field = size_field(size)
-    band = finest_band(frame, snapped, faces, dict(crossings), MeshReport(size, frame.levels))
-    keys, levels = octree_around_band(frame, crossings[X_AXIS_DIRECTION], surface, field, band.surface_keys, band.keys)
-    key_bounds = range_bounds(frame, snapped, 5, frame.levels - field.coarse_depth)
+    frame, _, _, _, keys, levels, key_bounds = _graded_pass_in_ranges(25, 5)
     leaf_range = np.searchsorted(key_bounds, keys, side="right") - 1
     anchors = octant_lattice_anchors(keys, frame)
     assert np.array_equal(point_owners(frame, anchors, key_bounds), leaf_range) and len(set(leaf_range.tolist())) > 2
