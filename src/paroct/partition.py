@@ -20,6 +20,7 @@ octree are the whole surface's there.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import partial
 from typing import Callable, Iterable, Iterator, Sequence
@@ -486,9 +487,20 @@ def _near_ranges(keys, coarse, bounds, out, offsets):
     """keys_near_ranges' kernel: with out empty, counts (K,) of the ranges near each key; else fills
     out from offsets[k] with each key's ranges, ascending."""
     side = np.int64(1) << (MAX_LEVEL - coarse)
+    octant_mask = ~((np.int64(1) << (3 * (MAX_LEVEL - coarse))) - 1)
     counts = np.zeros(keys.shape[0], dtype=np.int64)
     found = np.empty(27, dtype=np.int64)
+    last = np.int64(-1)  # keys sorted: a coarse octant's cells come together, and share their ranges
+    n = 0
     for i in range(keys.shape[0]):
+        octant = keys[i] & octant_mask
+        if octant == last:
+            counts[i] = n
+            if out.shape[0]:
+                for q in range(n):
+                    out[offsets[i] + q] = found[q]
+            continue
+        last = octant
         x0, y0, z0 = morton_coords(keys[i])
         x0, y0, z0 = x0 & ~(side - 1), y0 & ~(side - 1), z0 & ~(side - 1)
         n = 0
@@ -708,6 +720,15 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
                      inside[lattice], target_keys, target_faces, band.keys[cut_edges_used], band.faces[cut_edges_used])
 
 
+def _finest_corners(anchors: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """The corners (K, 3) of the finest leaves (side 1) of leaves (anchors (L, 3), sides (L,)):
+    every band vertex a leaf among them has as a corner.  (A band vertex is a corner of a
+    finest band cell, and that cell touches every leaf with the vertex as a corner, so it is
+    among the leaves where they are a range's own and touching ones.)"""
+    finest = sides == 1
+    return (anchors[finest][:, None, :] + CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+
+
 def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int, end: int,
                         around: np.ndarray | None) -> tuple[LeafVertices, np.ndarray, np.ndarray, np.ndarray]:
     """mesh_range's lattice: (the vertices of the range's own and touching leaves, their
@@ -720,8 +741,7 @@ def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, b
     own = np.arange(before, before + end - first)
     anchors = octant_lattice_anchors(keys[rows], frame)
     sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
-    corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
-    in_range = band.vertices_at(corners)
+    in_range = band.vertices_at(_finest_corners(anchors, sides))
     vertices = number_vertices(anchors, sides, prefix=band.coords[in_range], eager=False)
     inside = vertex_classes(vertices, band.inside[in_range])
     # A touching leaf may have band corners in pieces the range does not read, and spread a
@@ -1034,12 +1054,30 @@ def range_shares(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_boun
         rows = np.sort(np.concatenate([np.arange(first, end), around]))
         read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
         before = int(np.searchsorted(around, first))
-        anchors = octant_lattice_anchors(keys[rows], frame)
-        sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
-        corners = (anchors[:, None, :] + sides[:, None, None] * CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+        corners = _finest_corners(octant_lattice_anchors(keys[rows], frame),
+                                  np.int64(1) << (frame.levels - levels[rows].astype(np.int64)))
         local_around = np.concatenate([np.arange(before), np.arange(before + end - first, rows.shape[0])])
-        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around,
-                         BandIndex.from_pieces([band[i] for i in read]).near(corners))
+        corner_keys = np.unique(pack_coords(corners))
+        near = BandIndex.from_pieces([_piece_near(band[i], corner_keys) for i in read]).near(corners)
+        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around, near)
+
+
+def _piece_near(piece: BandPiece, corner_keys: np.ndarray) -> BandPiece:
+    """The part of a band piece that BandIndex.near(corners) can keep (corner_keys: the
+    corners' pack_coords, sorted, distinct): its vertices among them, its edges with both
+    ends among them, and the edges those vertices warp onto.  Joining these parts instead of
+    the whole pieces sorts only what a range reads."""
+    kept = sorted_lookup(corner_keys, pack_coords(piece.coords))[1]
+    edge_kept = sorted_lookup(corner_keys, pack_coords(piece.edge_starts))[1] & \
+        sorted_lookup(corner_keys, pack_coords(piece.edge_ends))[1]
+    targets = piece.targets[kept]
+    edge_kept[targets[targets >= 0]] = True
+    new_edge = np.cumsum(edge_kept) - 1
+    return dataclasses.replace(piece, coords=piece.coords[kept], inside=piece.inside[kept],
+                               targets=np.where(targets >= 0, new_edge[targets], -1),
+                               edge_starts=piece.edge_starts[edge_kept], edge_ends=piece.edge_ends[edge_kept],
+                               directions=piece.directions[edge_kept], fracs=piece.fracs[edge_kept],
+                               points=piece.points[edge_kept], faces=piece.faces[edge_kept])
 
 
 def _range_task(task: Callable, frame: FatFrame, share: RangeShare):
