@@ -336,8 +336,9 @@ def star_partners(tets: np.ndarray, star: list[int], v: int) -> dict[tuple[int, 
     return out
 
 
-def repair_pinches(tets: np.ndarray, bad, rank=None) -> np.ndarray:
-    """Alive mask (M,) of paroct.repair's worklist repair, by dictionaries.
+def repair_pinches(tets: np.ndarray, bad, rank=None, checked: set | None = None) -> np.ndarray:
+    """Alive mask (M,) of paroct.repair's worklist repair, by dictionaries; checked, if given,
+    gets every vertex the worklist checks.
 
     rank (V,): the order of the vertices (default: their ids).  A stack of vertices starts
     with ``bad`` in ascending rank (the last popped first).  A vertex's live star splits into
@@ -363,6 +364,8 @@ def repair_pinches(tets: np.ndarray, bad, rank=None) -> np.ndarray:
     while work:
         v = work.pop()
         queued.discard(v)
+        if checked is not None:
+            checked.add(v)
         live = [t for t in star.get(v, []) if alive[t]]
         piece = {t: t for t in live}
 
@@ -764,3 +767,21 @@ def owned_ids(keys, owners):
     index = {pair: i for i, pair in enumerate(pairs)}
     return [[index[(int(o), int(k))] for k, o in zip(piece_keys, piece_owners)]
             for piece_keys, piece_owners in zip(keys, owners)], len(pairs)
+
+
+def pinch_clusters(tets, bad, rings: int) -> list[list[int]]:
+    """The bad vertices grouped as repair.local_repair groups them, by sets: the tets touching
+    the vertices within ``rings`` edges of a bad one, joined through shared vertices; each
+    group ascending, the groups by their first vertex."""
+    rows = [set(map(int, t)) for t in np.asarray(tets).tolist()]
+    region = set(int(v) for v in bad)
+    for _ in range(rings):
+        region = set().union(*[r for r in rows if r & region])
+    sub = [r for r in rows if r & region]
+    groups: list[set] = []
+    for r in sub:  # merge every group sharing a vertex with this tet
+        touching_groups = [g for g in groups if g & r]
+        merged = set(r).union(*touching_groups)
+        groups = [g for g in groups if not g & r] + [merged]
+    clusters = [sorted(int(v) for v in bad if v in g) for g in groups]
+    return sorted((c for c in clusters if c), key=lambda c: c[0])

@@ -154,10 +154,68 @@ def test_components_of_random_triangles_match_a_set_twin(seed):
     assert topology.components == naive.face_components(faces) >= 1
 
 
+def _best_order_twin(tets, bad, points, within=None):
+    """naive.repair_pinches in each of PINCH_ORDERS of the points' coordinates, the least
+    volume removed kept (ties: the first), among the orders whose worklist checks only
+    vertices in ``within`` (a set; None: any): the alive mask (M,), or None if no order does."""
+    best = None
+    for axes, sign in repair.PINCH_ORDERS:
+        rank = np.empty(len(points), dtype=np.int64)
+        rank[np.lexsort((sign * points[:, list(axes)]).T[::-1])] = np.arange(len(points))
+        checked: set = set()
+        alive = naive.repair_pinches(tets, bad, rank, checked)
+        volume = sum(abs(naive._det3(points[t[1:]] - points[t[0]])) for t in tets[~alive]) / 6  # as repair._volume
+        if (within is None or checked <= within) and (best is None or volume < best[0]):
+            best = (volume, alive)
+    return None if best is None else best[1]
+
+
+def _cluster_twin(tets, bad, points):
+    """local_repair with points, by the twins: each cluster (naive.pinch_clusters) in its best
+    order among those whose worklist stays within one ring of its bad vertices; if some
+    cluster has none, every bad vertex in the one best order on the whole mesh."""
+    want = np.ones(len(tets), dtype=bool)
+    for cluster in naive.pinch_clusters(tets, bad, repair.PINCH_RINGS):
+        ring = set(tets[np.isin(tets, cluster).any(axis=1)].ravel().tolist())
+        alive = _best_order_twin(tets, np.array(cluster), points, within=ring)
+        if alive is None:
+            return _best_order_twin(tets, bad, points)
+        want &= alive
+    return want
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_each_pinch_cluster_keeps_its_own_best_order(seed):
+    """Two blocks pinched near one corner each, apart: local_repair repairs each cluster of
+    bad vertices (naive.pinch_clusters) in the order that removes the least volume there, so
+    the result is the twin's cluster by cluster, never more volume than the one order best
+    over both, and a cluster's repair needs nothing from the other (as a partition's would)."""
+    tets_a, core_a = _pinched_block(seed, n=8, within=4)
+    tets_b, core_b = _pinched_block(100 + seed, n=8, within=4)
+    points_a = _pinched_block_points(seed, n=8)
+    n = len(points_a)
+    points_b = points_a[:, [1, 2, 0]] * np.array([1.0, -1.0, 1.0]) + np.array([20.0, 0.0, 0.0])  # turned, apart
+    tets = np.concatenate([tets_a, tets_b + n]).astype(np.int32)
+    core = np.concatenate([core_a, core_b])
+    points = np.concatenate([points_a, points_b])
+    faces = boundary_faces(tets, match_faces(tets)[0])
+    bad = np.nonzero(nonmanifold_vertices(faces, len(core)))[0]
+    assert len(naive.pinch_clusters(tets, bad, repair.PINCH_RINGS)) >= 2
+    want = _cluster_twin(tets, bad, points)
+    got = local_repair(tets, bad, len(core), points=points)
+    assert np.array_equal(got, want) and not got.all()
+    alone = _best_order_twin(tets, bad, points)  # one order for both blocks
+
+    def volume(alive):
+        return sum(abs(naive._det3(points[t[1:]] - points[t[0]])) / 6 for t in tets[~alive])
+
+    assert volume(got) <= volume(alone) + 1e-12
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_pinch_repair_follows_the_points_not_the_numbering(seed):
     """With the points given, the worklist's order and its ties follow their coordinates (in
-    each of PINCH_ORDERS, the least volume removed kept): the repair of the pinched block
+    each of PINCH_ORDERS, the least volume removed kept for each cluster): the repair of the pinched block
     against the dictionary twin ranking the vertices so, and the same tets removed (as point
     sets) however the vertices are numbered and the tets ordered.
     Ranges of a Morton partition number the points their own way (a gyroid sheet meshed in
@@ -166,15 +224,7 @@ def test_pinch_repair_follows_the_points_not_the_numbering(seed):
     points = _pinched_block_points(seed)
     faces = boundary_faces(tets, match_faces(tets)[0])
     bad = np.nonzero(nonmanifold_vertices(faces, len(core)))[0]
-    best = None
-    for axes, sign in repair.PINCH_ORDERS:  # the twin in each order; the least volume removed is kept
-        rank = np.empty(len(points), dtype=np.int64)
-        rank[np.lexsort((sign * points[:, list(axes)]).T[::-1])] = np.arange(len(points))
-        alive = naive.repair_pinches(tets, bad, rank)
-        volume = sum(abs(naive._det3(points[t[1:]] - points[t[0]])) / 6 for t in tets[~alive])
-        if best is None or volume < best[0]:
-            best = (volume, alive)
-    want = best[1]
+    want = _cluster_twin(tets, bad, points)
     out, removed, _, _ = remove_pinches(tets.copy(), core.copy(), points)
     assert removed == int((~want).sum()) > 0 and np.array_equal(out, tets[want])
     rng = np.random.default_rng(100 + seed)

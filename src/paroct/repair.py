@@ -11,12 +11,14 @@ removal is counted and reported; the caller warns when volume or topology change
 
 from __future__ import annotations
 
+from typing import Iterator
+
 import numba as nb
 import numpy as np
 
 from .topology import TET_FACES as _FACES
 from .topology import (SurfaceTopology, _sort3, keep_rows, local_vertex_ids, match_faces, nonmanifold_of_fans,
-                       surface_topology, touching, used_vertices, vertex_fans)
+                       surface_topology, touching, union, used_vertices, vertex_fans)
 
 
 @nb.njit(cache=True)
@@ -439,10 +441,16 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
 
     The repair of a vertex reads only its star, so it runs on the stars of the vertices at
     most ``rings`` edges from a bad one (the tets touching them: each of those stars is
-    complete there); only if the worklist leaves them does it run on the whole mesh.  With
-    points (V, 3), it runs in each of PINCH_ORDERS of their coordinates and keeps the one
-    that removes the least volume, so no numbering of the mesh changes the result; without,
-    in the order of the ids.  A run on part of the mesh and on the whole give the same.
+    complete there); only if the worklist leaves them does it run on the whole mesh.  Those
+    tets fall into clusters (connected through shared vertices) that the repair treats apart:
+    no removal in one touches another.  With points (V, 3), each cluster is repaired in each
+    of PINCH_ORDERS of their coordinates, and of the orders whose worklist stays within the
+    cluster's stars the one that removes the least volume there is kept (ties: the first), so
+    no numbering of the mesh changes the result and a cluster needs nothing from the others
+    (a partition can repair its own); should no order stay within a cluster's stars, every
+    cluster is repaired on the whole mesh, in the one order that removes the least volume in
+    all.  Without points, in the order of the ids.  A run on part of the mesh and on the
+    whole give the same.
     """
     region = np.zeros(n_vertices, dtype=bool)
     region[bad] = True
@@ -453,24 +461,93 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
     sub_ids = np.flatnonzero(near)
     sub = np.take(tets, sub_ids, axis=0)
     in_sub = used_vertices(sub, n_vertices)
+    if points is None:
+        return _repaired_by_ids(tets, sub_ids, sub, bad, region)
+    ranks = [_ranks(points, order, in_sub, n_vertices) for order in PINCH_ORDERS]
+    alive = np.ones(tets.shape[0], dtype=bool)
+    for rows, vertices, cluster_tets, members in _clusters(sub, bad):
+        best, best_volume = None, np.inf
+        for rank in ranks:
+            cluster_rank = rank[vertices]
+            kept, ok = _repair(cluster_tets, members[np.argsort(cluster_rank[members], kind="stable")],
+                               vertices.shape[0], region[vertices], cluster_rank)
+            volume = _volume(points, sub[rows[~kept]])
+            if ok and volume < best_volume:
+                best, best_volume = kept, volume
+        if best is None:  # every order's worklist left the cluster's stars
+            return _repaired_on_whole_mesh(tets, bad, n_vertices, points)
+        alive[sub_ids[rows[~best]]] = False
+    return alive
+
+
+def _clusters(sub: np.ndarray, bad: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """The clusters of tets sub (S, 4) (joined through shared vertices) holding bad vertices,
+    each numbered on its own, so that repairing one costs its size: (rows (ascending) of sub,
+    its vertices (K,) as mesh ids, its tets (R, 4) numbered 0..K-1 in that order, its bad
+    vertices in those numbers)."""
+    local, vertex_of = local_vertex_ids(sub)
+    roots = _vertex_roots(local, vertex_of.shape[0])
+    by_root = np.argsort(roots, kind="stable")  # each cluster's vertices together
+    vertex_roots = roots[by_root]
+    place = np.empty(vertex_of.shape[0], dtype=np.int64)  # each vertex's number in its cluster
+    place[by_root] = np.arange(vertex_of.shape[0]) - np.searchsorted(vertex_roots, vertex_roots)
+    tet_rows = np.argsort(roots[local[:, 0]], kind="stable")
+    tet_roots = roots[local[tet_rows, 0]]
+    sorted_ids = np.argsort(vertex_of)
+    bad_local = sorted_ids[np.searchsorted(vertex_of, bad, sorter=sorted_ids)]
+    bad_local = bad_local[np.argsort(roots[bad_local], kind="stable")]
+    bad_roots = roots[bad_local]
+    for root in np.unique(bad_roots):
+        lo, hi = np.searchsorted(vertex_roots, [root, root + 1])
+        rows = tet_rows[slice(*np.searchsorted(tet_roots, [root, root + 1]))]
+        members = bad_local[slice(*np.searchsorted(bad_roots, [root, root + 1]))]
+        yield rows, vertex_of[by_root[lo:hi]], place[local[rows]], place[members]
+
+
+def _repaired_by_ids(tets: np.ndarray, sub_ids: np.ndarray, sub: np.ndarray, bad: np.ndarray,
+                     region: np.ndarray) -> np.ndarray:
+    """local_repair without points: in the order of the ids, all clusters at once, on sub
+    (tets[sub_ids], holding every star of region), or on the whole mesh should the worklist
+    leave it."""
+    n_vertices = region.shape[0]
+    ids = np.arange(n_vertices)  # a vertex's rank is its id
+    sub_alive, ok = _repair(sub, np.sort(bad), n_vertices, region, ids)
+    if not ok:
+        return _repair(tets, np.sort(bad), n_vertices, np.ones(n_vertices, dtype=bool), ids)[0]
+    alive = np.ones(tets.shape[0], dtype=bool)
+    alive[sub_ids[~sub_alive]] = False
+    return alive
+
+
+def _repaired_on_whole_mesh(tets: np.ndarray, bad: np.ndarray, n_vertices: int, points: np.ndarray) -> np.ndarray:
+    """Every bad vertex repaired on the whole mesh in each of PINCH_ORDERS, the order that
+    removes the least volume kept (ties: the first): local_repair's fallback."""
+    whole = np.ones(n_vertices, dtype=bool)
     best, best_volume = None, np.inf
-    for order in (None,) if points is None else PINCH_ORDERS:
-        rank = _ranks(points, order, in_sub, n_vertices)
-        sub_alive, ok = _repair(sub, bad[np.argsort(rank[bad], kind="stable")], n_vertices, region, rank)
-        if ok:
-            alive = np.ones(tets.shape[0], dtype=bool)
-            alive[sub_ids[~sub_alive]] = False
-        else:
-            rank = _ranks(points, order, np.ones(n_vertices, dtype=bool), n_vertices)
-            alive, _ = _repair(tets, bad[np.argsort(rank[bad], kind="stable")], n_vertices,
-                               np.ones(n_vertices, dtype=bool), rank)
-        if points is None:
-            return alive
+    for order in PINCH_ORDERS:
+        rank = _ranks(points, order, whole, n_vertices)
+        alive, _ = _repair(tets, bad[np.argsort(rank[bad], kind="stable")], n_vertices, whole, rank)
         volume = _volume(points, np.compress(~alive, tets, axis=0))
         if volume < best_volume:
             best, best_volume = alive, volume
     assert best is not None  # PINCH_ORDERS is not empty
     return best
+
+
+@nb.njit(cache=True)
+def _vertex_roots(tets, n_vertices):
+    """The root (V,) of each vertex's cluster: vertices joined through the tets (T, 4) that
+    hold them (union-find; a vertex in no tet is its own root)."""
+    parent = np.arange(n_vertices)
+    for t in range(tets.shape[0]):
+        for k in range(1, 4):
+            union(parent, tets[t, 0], tets[t, k])
+    for v in range(n_vertices):
+        r = v
+        while parent[r] != r:
+            r = parent[r]
+        parent[v] = r
+    return parent
 
 
 def _volume(points: np.ndarray, tets: np.ndarray) -> float:
@@ -480,20 +557,16 @@ def _volume(points: np.ndarray, tets: np.ndarray) -> float:
     return float(np.abs(np.einsum("ij,ij->i", a, np.cross(b, c))).sum() / 6.0)
 
 
-def _ranks(points: np.ndarray | None, order: tuple | None, among: np.ndarray, n_vertices: int) -> np.ndarray:
+def _ranks(points: np.ndarray, order: tuple, among: np.ndarray, n_vertices: int) -> np.ndarray:
     """Rank (V,) int64 of each vertex marked in among (V,) bool in one of PINCH_ORDERS of its
     coordinates, points (V, 3): order = (axes, sign), lexicographic over sign * the
-    coordinates in axes order (equal points by id; ids alone if points is None); others -1.
-    Ranks among a subset keep the order of the whole."""
+    coordinates in axes order (equal points by id); others -1.  Ranks among a subset keep the
+    order of the whole."""
     rank = np.full(n_vertices, -1, dtype=np.int64)
     ids = np.flatnonzero(among)
-    if points is None or order is None:
-        sorted_ids = ids
-    else:
-        axes, sign = order
-        keys = sign * points[ids][:, list(axes)]
-        sorted_ids = ids[np.lexsort(keys.T[::-1])]
-    rank[sorted_ids] = np.arange(ids.shape[0])
+    axes, sign = order
+    keys = sign * points[ids][:, list(axes)]
+    rank[ids[np.lexsort(keys.T[::-1])]] = np.arange(ids.shape[0])
     return rank
 
 
