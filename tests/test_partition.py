@@ -219,6 +219,38 @@ def test_every_leaf_anchor_is_owned_by_the_leaf_range_and_packed_points_unpack()
     assert np.array_equal(unpack_coords(pack_coords(anchors)), anchors)
 
 
+def test_a_range_share_holds_what_its_whole_pieces_would_give():
+    """range_shares cuts each band piece a range reads to the corners of its finest leaves
+    before joining them: the same index (vertices, classes, warps, cut edges and points) as
+    joining the whole pieces and keeping what those corners read, and its leaves are its own
+    and touching ones, numbered locally."""
+    from paroct.partition import (BandIndex, _finest_corners, band_in_range, band_pieces_for, range_shares,
+                                  touching_leaves)
+    from paroct.octree import octant_lattice_anchors
+
+    frame, snapped, faces, _, keys, levels, key_bounds = _graded_pass_in_ranges(25, 5)
+    pieces = [band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1])) for r in range(5)]
+    leaf_bounds = np.searchsorted(keys, key_bounds)
+    shares = list(range_shares(frame, keys, levels, key_bounds, pieces, leaf_bounds))
+    assert len(shares) == 5
+    for r, share in enumerate(shares):
+        first, end = int(leaf_bounds[r]), int(leaf_bounds[r + 1])
+        around = touching_leaves(keys, levels, first, end)
+        rows = np.sort(np.concatenate([np.arange(first, end), around]))
+        assert np.array_equal(share.keys, keys[rows]) and np.array_equal(share.keys[share.first:share.end],
+                                                                         keys[first:end])
+        assert np.array_equal(share.keys[share.around], keys[around])
+        read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
+        corners = _finest_corners(octant_lattice_anchors(keys[rows], frame),
+                                  np.int64(1) << (frame.levels - levels[rows].astype(np.int64)))
+        want = BandIndex.from_pieces([pieces[i] for i in read]).near(corners)
+        for name in ("vertex_keys", "coords", "inside", "target_keys", "keys", "starts", "ends", "directions",
+                     "points", "faces"):
+            assert np.array_equal(getattr(share.band, name), getattr(want, name)), (r, name)
+        assert np.array_equal(share.band.fracs.view(np.int64), want.fracs.view(np.int64))
+    assert sum(s.band.keys.shape[0] for s in shares) > 0
+
+
 def test_a_part_thinner_than_the_lattice_is_refused_in_ranges():
     surface = paroct.load_surface(manifold3d.Manifold.cube([1.0, 1.0, 0.01]))
     with pytest.raises(paroct.ParoctError, match="no tets"):
