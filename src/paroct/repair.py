@@ -466,18 +466,31 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
     ranks = [_ranks(points, order, in_sub, n_vertices) for order in PINCH_ORDERS]
     alive = np.ones(tets.shape[0], dtype=bool)
     for rows, vertices, cluster_tets, members in _clusters(sub, bad):
-        best, best_volume = None, np.inf
-        for rank in ranks:
-            cluster_rank = rank[vertices]
-            kept, ok = _repair(cluster_tets, members[np.argsort(cluster_rank[members], kind="stable")],
-                               vertices.shape[0], region[vertices], cluster_rank)
-            volume = _volume(points, sub[rows[~kept]])
-            if ok and volume < best_volume:
-                best, best_volume = kept, volume
-        if best is None:  # every order's worklist left the cluster's stars
-            return _repaired_on_whole_mesh(tets, bad, n_vertices, points)
-        alive[sub_ids[rows[~best]]] = False
+        kept = _least_volume_repair(cluster_tets, members, region[vertices], [rank[vertices] for rank in ranks],
+                                    points, sub[rows])
+        if kept is None:  # every order's worklist left the cluster's stars
+            whole = np.ones(n_vertices, dtype=bool)
+            kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order, whole, n_vertices)
+                                                           for order in PINCH_ORDERS], points, tets)
+            assert kept is not None  # on the whole mesh every star is complete
+            return kept
+        alive[sub_ids[rows[~kept]]] = False
     return alive
+
+
+def _least_volume_repair(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray, ranks: list[np.ndarray],
+                         points: np.ndarray, mesh_tets: np.ndarray) -> np.ndarray | None:
+    """_repair of tets (T, 4) from the bad vertices in each of the orders ranks (their
+    vertices' ranks, PINCH_ORDERS'): the kept mask (T,) of the run that removes the least
+    volume (ties: the first) among those that stay where stars are complete, or None if none
+    does.  mesh_tets: the same tets by mesh ids, points (V, 3) theirs (for the volumes)."""
+    best, best_volume = None, np.inf
+    for rank in ranks:
+        kept, ok = _repair(tets, bad[np.argsort(rank[bad], kind="stable")], complete.shape[0], complete, rank)
+        volume = _volume(points, mesh_tets[~kept])
+        if ok and volume < best_volume:
+            best, best_volume = kept, volume
+    return best
 
 
 def _clusters(sub: np.ndarray, bad: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -517,21 +530,6 @@ def _repaired_by_ids(tets: np.ndarray, sub_ids: np.ndarray, sub: np.ndarray, bad
     alive = np.ones(tets.shape[0], dtype=bool)
     alive[sub_ids[~sub_alive]] = False
     return alive
-
-
-def _repaired_on_whole_mesh(tets: np.ndarray, bad: np.ndarray, n_vertices: int, points: np.ndarray) -> np.ndarray:
-    """Every bad vertex repaired on the whole mesh in each of PINCH_ORDERS, the order that
-    removes the least volume kept (ties: the first): local_repair's fallback."""
-    whole = np.ones(n_vertices, dtype=bool)
-    best, best_volume = None, np.inf
-    for order in PINCH_ORDERS:
-        rank = _ranks(points, order, whole, n_vertices)
-        alive, _ = _repair(tets, bad[np.argsort(rank[bad], kind="stable")], n_vertices, whole, rank)
-        volume = _volume(points, np.compress(~alive, tets, axis=0))
-        if volume < best_volume:
-            best, best_volume = alive, volume
-    assert best is not None  # PINCH_ORDERS is not empty
-    return best
 
 
 @nb.njit(cache=True)
