@@ -440,42 +440,69 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
     """Mask (M,) of the tets kept by the worklist repair (_repair) started at the bad vertices.
 
     The repair of a vertex reads only its star, so it runs on the stars of the vertices at
-    most ``rings`` edges from a bad one (the tets touching them: each of those stars is
-    complete there); only if the worklist leaves them does it run on the whole mesh.  Those
-    tets fall into clusters (connected through shared vertices) that the repair treats apart:
-    no removal in one touches another.  With points (V, 3), each cluster is repaired in each
-    of PINCH_ORDERS of their coordinates, and of the orders whose worklist stays within the
-    cluster's stars the one that removes the least volume there is kept (ties: the first), so
-    no numbering of the mesh changes the result and a cluster needs nothing from the others
-    (a partition can repair its own); should no order stay within a cluster's stars, every
-    cluster is repaired on the whole mesh, in the one order that removes the least volume in
-    all.  Without points, in the order of the ids.  A run on part of the mesh and on the
-    whole give the same.
+    most ``rings`` edges from a bad one (pinch_neighbourhood: the tets touching them, each of
+    those stars complete there); only if the worklist leaves them does it run on the whole
+    mesh.  With points (V, 3), those tets are repaired cluster by cluster
+    (repair_near_pinches), so no numbering of the mesh changes the result and a cluster needs
+    nothing from the others (a partition can repair its own); should no order stay within a
+    cluster's stars, every cluster is repaired on the whole mesh, in the one order of
+    PINCH_ORDERS that removes the least volume in all.  Without points, in the order of the
+    ids.  A run on part of the mesh and on the whole give the same.
     """
+    sub_ids, region = pinch_neighbourhood(tets, bad, n_vertices, rings)
+    sub = np.take(tets, sub_ids, axis=0)
+    if points is None:
+        return _repaired_by_ids(tets, sub_ids, sub, bad, region)
+    vertex_of, local = np.unique(sub, return_inverse=True)  # ascending ids: ties by id, as on the whole mesh
+    kept = repair_near_pinches(local.reshape(sub.shape), np.searchsorted(vertex_of, bad), region[vertex_of],
+                               points[vertex_of])
+    if kept is None:  # a cluster's worklist left its stars in every order
+        whole = np.ones(n_vertices, dtype=bool)
+        kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order, whole, n_vertices)
+                                                       for order in PINCH_ORDERS], points, tets)
+        assert kept is not None  # on the whole mesh every star is complete
+        return kept
+    alive = np.ones(tets.shape[0], dtype=bool)
+    alive[sub_ids[~kept]] = False
+    return alive
+
+
+def pinch_neighbourhood(tets: np.ndarray, bad: np.ndarray, n_vertices: int,
+                        rings: int = PINCH_RINGS) -> tuple[np.ndarray, np.ndarray]:
+    """The tets local_repair works on first: (their rows (ascending) in tets (M, 4), region
+    (n_vertices,) bool, the vertices at most ``rings`` edges from a bad one, whose stars are
+    all among those tets: the tets touching them)."""
     region = np.zeros(n_vertices, dtype=bool)
     region[bad] = True
     near = touching(tets, region)
     for _ in range(rings):
         region = used_vertices(np.compress(near, tets, axis=0), n_vertices)
         near = touching(tets, region)
-    sub_ids = np.flatnonzero(near)
-    sub = np.take(tets, sub_ids, axis=0)
-    in_sub = used_vertices(sub, n_vertices)
-    if points is None:
-        return _repaired_by_ids(tets, sub_ids, sub, bad, region)
-    ranks = [_ranks(points, order, in_sub, n_vertices) for order in PINCH_ORDERS]
-    alive = np.ones(tets.shape[0], dtype=bool)
-    for rows, vertices, cluster_tets, members in _clusters(sub, bad):
-        kept = _least_volume_repair(cluster_tets, members, region[vertices], [rank[vertices] for rank in ranks],
-                                    points, sub[rows])
-        if kept is None:  # every order's worklist left the cluster's stars
-            whole = np.ones(n_vertices, dtype=bool)
-            kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order, whole, n_vertices)
-                                                           for order in PINCH_ORDERS], points, tets)
-            assert kept is not None  # on the whole mesh every star is complete
-            return kept
-        alive[sub_ids[rows[~kept]]] = False
-    return alive
+    return np.flatnonzero(near), region
+
+
+def repair_near_pinches(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray,
+                        points: np.ndarray) -> np.ndarray | None:
+    """Kept mask (S,) of the tets (S, 4) around the bad vertices (pinch_neighbourhood's, in
+    their own ids 0..K-1, numbered in the order of the mesh's ids), or None if a cluster's
+    worklist leaves the stars in every order (then the whole mesh must be repaired).
+
+    The tets fall into clusters (joined through shared vertices) that no removal in another
+    touches; each is repaired in each of PINCH_ORDERS of the coordinates of its vertices
+    (points (K, 3)), and of the orders whose worklist stays within the vertices whose star is
+    complete there (complete (K,) bool: pinch_neighbourhood's region) the one that removes
+    the least volume is kept (ties: the first)."""
+    n_vertices = points.shape[0]
+    every = np.ones(n_vertices, dtype=bool)
+    ranks = [_ranks(points, order, every, n_vertices) for order in PINCH_ORDERS]
+    kept_all = np.ones(tets.shape[0], dtype=bool)
+    for rows, vertices, cluster_tets, members in _clusters(tets, bad):
+        kept = _least_volume_repair(cluster_tets, members, complete[vertices], [rank[vertices] for rank in ranks],
+                                    points, tets[rows])
+        if kept is None:
+            return None
+        kept_all[rows[~kept]] = False
+    return kept_all
 
 
 def _least_volume_repair(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray, ranks: list[np.ndarray],
