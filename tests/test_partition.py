@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 import paroct
-from paroct import octant
+from paroct import mesher, octant
 from paroct.check import canonical_form
 from paroct.octree import balance
 from paroct.partition import mesh_in_ranges, mesh_range, pack_coords, touching_leaves
+from paroct.repair import remove_pinches
 
 from . import naive
 
@@ -493,17 +494,21 @@ def _gyroid_sheet() -> manifold3d.Manifold:
     return manifold3d.Manifold.level_set(sdf, [-0.55, -0.55, -0.55, 0.55, 0.55, 0.55], 0.042)
 
 
-def test_ranges_repair_pinches_as_the_one_pass_does():
-    """The gyroid sheet at diag/50, uniform, repairs 426 tets at pinches: numbered by ranges,
-    the repair takes the same tets (when its order came from the vertex ids, both passes
-    repaired 441 tets, not the same ones, and the meshes differed)."""
+def test_ranges_repair_pinches_as_the_one_pass_does(monkeypatch):
+    """The gyroid sheet at diag/50, uniform, repairs 426 tets at pinches: repaired in the
+    ranges (range_pinches), the same tets go, and the merged mesh's check finds no pinch left
+    (when the repair's order came from the vertex ids, both passes repaired 441 tets, not the
+    same ones, and the meshes differed)."""
     surface = paroct.load_surface(_gyroid_sheet())
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 50
     whole = paroct.mesh(surface, size, max_size=size, thin_features=False)
     assert whole.report.repaired_tets > 100 and "warps" not in whole.report.stage_seconds
     want = _canonical(whole)
     for n_parts in (2, 7):
+        checked = []  # what the merged mesh's check removes: nothing, the ranges repaired it
+        monkeypatch.setattr(mesher, "remove_pinches", lambda *a: checked.append(remove_pinches(*a)) or checked[-1])
         ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size)
+        assert [removed for _, removed, _, _ in checked] == [0]
         assert ranged.report.repaired_tets == whole.report.repaired_tets
         for got, expected in zip(_canonical(ranged), want):
             assert np.array_equal(got, expected), n_parts

@@ -241,3 +241,34 @@ def test_pinch_repair_follows_the_points_not_the_numbering(seed):
         return sorted(tuple(sorted(map(tuple, p[row].tolist()))) for row in t)
 
     assert as_point_sets(out2, moved_points) == as_point_sets(out, points)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pinches_repaired_in_ranges_are_the_whole_meshs(seed):
+    """The two pinched blocks' tets cut into ranges at random rows, each range's points
+    numbered its own way: the repair in ranges (range_pinches) keeps exactly the tets that
+    remove_pinches keeps of the whole mesh, and the boundary it finds is the whole mesh's."""
+    from paroct.range_pinches import RangeTets, boundary_of_ranges, range_boundary, repair_pinches_in_ranges
+
+    rng = np.random.default_rng(seed)
+    tets_a, core_a = _pinched_block(seed, n=8, within=5)
+    tets_b, core_b = _pinched_block(50 + seed, n=8)
+    points_a = _pinched_block_points(seed, n=8)
+    points_b = points_a[:, [2, 0, 1]] + np.array([0.0, 12.0, 0.0])
+    n = len(points_a)
+    tets = np.concatenate([tets_a, tets_b + n]).astype(np.int32)
+    core = np.concatenate([core_a, core_b])
+    points = np.concatenate([points_a, points_b])
+    cuts = np.sort(rng.choice(np.arange(1, len(tets)), size=int(rng.integers(1, 7)), replace=False))
+    parts = []
+    for rows in np.split(np.arange(len(tets)), cuts):
+        ids = rng.permutation(np.unique(tets[rows]))
+        local = np.argsort(ids)[np.searchsorted(ids[np.argsort(ids)], tets[rows])].astype(np.int32)
+        parts.append(RangeTets(ids.astype(np.int64), local, core[ids], points[ids]))
+    assert _face_set(boundary_of_ranges([range_boundary(p) for p in parts])) == \
+        _face_set(stuffed_boundary(tets, core))
+    kept = repair_pinches_in_ranges(parts)
+    assert kept is not None
+    out, removed, _, _ = remove_pinches(tets.copy(), core.copy(), points)
+    got = np.concatenate([p.ids[p.tets[k]] for p, k in zip(parts, kept)])
+    assert removed > 0 and np.array_equal(got, out)

@@ -955,13 +955,20 @@ def _with_missed_parts(walls: ThinFeatures, frame: FatFrame, snapped: np.ndarray
 
 
 def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, targets: np.ndarray, cut_faces: np.ndarray,
-            report: MeshReport, stages: _Stages, surface: Surface, size: float) -> MeshResult:
+            report: MeshReport, stages: _Stages, surface: Surface, size: float, *, removed: int = 0,
+            lost: np.ndarray | None = None) -> MeshResult:
     """Repair pinches, fill the report's quality, volume and topology, and drop unused points:
     the result of a pass.  points, out_tets: stuff's output; inside, targets (V,): over the
     lattice vertices, points 0..V-1 of the stuffed mesh; cut_faces (E,): the surface triangle
-    of each cut point, points V..V+E-1 (CutEdges.faces); size: the band's longest edge."""
+    of each cut point, points V..V+E-1 (CutEdges.faces); size: the band's longest edge.
+    removed, lost: where the pinches were repaired already (in ranges), the number of tets
+    removed and the mask (len(points),) of their vertices, whose exposed faces can now lie
+    on the boundary."""
     core = _core(inside, targets, points.shape[0])
-    out_tets, report.repaired_tets, faces_out, boundary = remove_pinches(out_tets, core, points)
+    if lost is not None:
+        core &= ~lost
+    out_tets, again, faces_out, boundary = remove_pinches(out_tets, core, points)
+    report.repaired_tets = removed + again
     stages.done("repair")
 
     _measure(points, out_tets, core, boundary, report)

@@ -43,6 +43,7 @@ from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
 from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field
 from .quality import OUTSIDE as OUTSIDE_BOUND
+from .range_pinches import RangeTets, repair_pinches_in_ranges
 from .stuffing import CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
@@ -894,16 +895,21 @@ def owned_ids(keys: Sequence[np.ndarray], owners: Sequence[np.ndarray], n_ranges
     return ids, int(first[-1])
 
 
-def merge_ranges(pieces: list[RangeMesh], frame: FatFrame,
-                 key_bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The pieces (the ranges of key_bounds, in order) as one stuffed mesh: each lattice vertex
-    once, then each cut point once (by its edge), the cut points of the edges the vertices
-    warp onto included (NaN where no tet uses one): (points (L + C, 3), tets (M, 4) int32,
-    inside (L,), targets (L,) into the C cut points, cut_faces (C,) int32 the triangle of
-    each).  Vertices and cut points are numbered by the ranges that own them (point_owners,
-    owned_ids), in range order and by key within a range.  A vertex or cut point the pieces
-    place, classify or warp differently is an AssertionError: stuffing in ranges must agree
-    where they meet."""
+@dataclass(frozen=True)
+class RangeNumbering:
+    """The mesh's ids of the ranges' points (number_ranges): vertex_ids[r] (V_r,) of piece r's
+    lattice vertices, 0..n_vertices-1; edge_ids[r] of its edges (its cut points', then those
+    its vertices warp onto), 0..n_edges-1, the cut points being points n_vertices + those."""
+
+    vertex_ids: list[np.ndarray]
+    edge_ids: list[np.ndarray]
+    n_vertices: int
+    n_edges: int
+
+
+def number_ranges(pieces: Sequence[RangeMesh], frame: FatFrame, key_bounds: np.ndarray) -> RangeNumbering:
+    """Each lattice vertex and each cut point numbered once, by the ranges that own them
+    (point_owners, owned_ids): in range order, and by key within a range."""
     n_ranges = key_bounds.shape[0] - 1
     vertex_ids, n_vertices = owned_ids([p.vertex_keys for p in pieces],
                                        [point_owners(frame, unpack_coords(p.vertex_keys), key_bounds) for p in pieces],
@@ -912,6 +918,31 @@ def merge_ranges(pieces: list[RangeMesh], frame: FatFrame,
     edges = [np.concatenate([p.cut_keys, p.target_keys[p.target_keys >= 0]]) for p in pieces]
     edge_ids, n_edges = owned_ids(edges, [point_owners(frame, unpack_coords(e) >> 1, key_bounds) for e in edges],
                                   n_ranges)
+    return RangeNumbering(vertex_ids, edge_ids, n_vertices, n_edges)
+
+
+def range_tets(piece: RangeMesh, vertex_ids: np.ndarray, edge_ids: np.ndarray, n_vertices: int) -> RangeTets:
+    """A range's tets in the mesh's point ids (number_ranges' vertex_ids, edge_ids and
+    n_vertices of the piece), for the pinch repair in ranges (range_pinches)."""
+    n, n_cut = piece.vertex_keys.shape[0], piece.cut_keys.shape[0]
+    core = np.zeros(n + n_cut, dtype=bool)
+    core[:n] = piece.inside & (piece.target_keys < 0)  # mesher._core's, over the piece's points
+    return RangeTets(np.concatenate([vertex_ids, n_vertices + edge_ids[:n_cut]]), piece.tets, core, piece.points)
+
+
+def merge_ranges(pieces: list[RangeMesh], frame: FatFrame, key_bounds: np.ndarray,
+                 numbering: RangeNumbering | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+    """The pieces (the ranges of key_bounds, in order) as one stuffed mesh: each lattice vertex
+    once, then each cut point once (by its edge), the cut points of the edges the vertices
+    warp onto included (NaN where no tet uses one): (points (L + C, 3), tets (M, 4) int32,
+    inside (L,), targets (L,) into the C cut points, cut_faces (C,) int32 the triangle of
+    each).  Points are numbered by number_ranges (numbering: its result, if the caller has
+    it).  A vertex or cut point the pieces place, classify or warp differently is an
+    AssertionError: stuffing in ranges must agree where they meet."""
+    numbering = number_ranges(pieces, frame, key_bounds) if numbering is None else numbering
+    vertex_ids, edge_ids = numbering.vertex_ids, numbering.edge_ids
+    n_vertices, n_edges = numbering.n_vertices, numbering.n_edges
     inside = np.zeros(n_vertices, dtype=bool)
     targets = np.full(n_vertices, -1, dtype=np.int64)
     points = np.full((n_vertices + n_edges, 3), np.nan)
@@ -999,9 +1030,22 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     pieces = list(run(partial(_range_task, mesh_range, frame),
                       range_shares(frame, keys, levels, key_bounds, band, bounds)))
     stages.done("stuff")
-    points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds)
+    numbering = number_ranges(pieces, frame, key_bounds)
+    # The pinches are repaired in the ranges (range_pinches): the merged mesh is only checked.
+    parts = [range_tets(p, v, e, numbering.n_vertices)
+             for p, v, e in zip(pieces, numbering.vertex_ids, numbering.edge_ids)]
+    kept = repair_pinches_in_ranges(parts)
+    removed, bared = 0, None  # bared: the vertices of removed tets
+    if kept is not None:
+        bared = np.zeros(numbering.n_vertices + numbering.n_edges, dtype=bool)
+        for part, alive in zip(parts, kept):
+            bared[part.ids[part.tets[~alive]].ravel()] = True
+            removed += int(alive.shape[0] - np.count_nonzero(alive))
+        pieces = [dataclasses.replace(p, tets=p.tets[alive]) for p, alive in zip(pieces, kept)]
+    del parts
+    points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds, numbering)
     fresh = report_snapshot(report)
-    result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
+    result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h, removed=removed, lost=bared)
     if outside_bound(report):
         # As mesh(): stuffed again with every tet measured and other warps tried near the bad
         # ones, here over the ranges' lattice tets joined into one lattice.
@@ -1094,6 +1138,6 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
 
 __all__ = ["BandIndex", "BandPiece", "RangeLattice", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
            "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges",
-           "merge_band_pieces", "merge_range_lattices", "merge_ranges", "mesh_in_ranges", "mesh_range",
+           "merge_band_pieces", "merge_range_lattices", "merge_ranges", "mesh_in_ranges", "mesh_range", "number_ranges",
            "octree_in_range", "owned_ids", "pack_coords", "point_owners", "range_bounds", "range_lattice",
-           "range_shares", "RangeShare", "touching_leaves", "unpack_coords", "unresolved_cuts"]
+           "range_shares", "range_tets", "RangeNumbering", "RangeShare", "touching_leaves", "unpack_coords", "unresolved_cuts"]
