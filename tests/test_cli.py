@@ -243,6 +243,7 @@ def _unknown_extension(tmp_path):
         (lambda t, s: ["mesh", s, "--size", "abc"], "invalid float value: 'abc'"),
         (lambda t, s: ["mesh", s, "--size", "1", "--divisions", "3"], "not allowed with"),
         (lambda t, s: ["mesh", s, "--max-memory", "0"], "--max-memory 0"),
+        (lambda t, s: ["mesh", s, "--max-memory", "1e300"], r"--max-memory 1e\+300: must be a positive number"),
         (lambda t, s: ["mesh", s, "--size", "1e-4", "--max-memory", "1"], "GiB"),
         (lambda t, s: ["mesh", s, "-o", t / "out.xyz"], "unknown mesh format"),
         (lambda t, s: ["mesh", s, "--max-size", "1e-9"], "max_size = 1e-09 must be at least size"),

@@ -260,7 +260,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     patch_sizes = _sizing_options(args)
     max_memory = None
     if args.max_memory is not None:
-        if not (math.isfinite(args.max_memory) and args.max_memory > 0):
+        if not (math.isfinite(args.max_memory * 2**30) and args.max_memory > 0):  # 1e300 GiB: inf bytes
             raise ParoctError(f"--max-memory {args.max_memory}: must be a positive number of GiB")
         max_memory = int(args.max_memory * 2**30)
 
