@@ -11,7 +11,12 @@ model and size both meshed, prints:
   file (load_surface), the crossings of the seven lattice row directions with the surface
   and the lattice cells the surface meets, both at the requested size (fastest of
   ``repeat``, kernels warm).  A model whose floor exceeds its budget cannot reach the target
-  without new algorithms for those passes.
+  without new algorithms for those passes;
+- fresh and kept: the mesh call after the heap is returned to the system, as compare.py's
+  children return it before their timed call (so that their peak memory is the call's), and
+  with the heap kept from the call before, as in a process that meshes again; faults: the
+  call's minor page faults after the return (first touches of fresh memory).  Their
+  difference is what fresh pages cost the call.
 Last, per size, the median of needs and what the models that need least ask when more
 than half of them reach the target (which takes the median over the models there).
 """
@@ -22,6 +27,7 @@ import argparse
 import json
 import statistics
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +52,28 @@ def surface_floor(path: Path, size: float, repeat: int) -> tuple[float, float, f
                     repeat)
     cells = fastest(lambda: surface_cells(frame, snapped, faces, rays.snap_bits(frame), frame.levels), repeat)
     return load, rows, cells
+
+
+def heap_cost(path: Path, size: float, repeat: int) -> tuple[float, float, int]:
+    """Seconds of the mesh call at size after the heap is returned (compare._memory_baseline)
+    and with it kept, fastest of repeat each, and the fewest minor page faults of the first."""
+    import resource
+
+    import paroct
+    from compare import _memory_baseline
+
+    def call(fresh: bool) -> tuple[float, int]:
+        if fresh:
+            _memory_baseline()
+        faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        t = time.perf_counter()
+        paroct.mesh(path, size=size)
+        return time.perf_counter() - t, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults
+
+    call(False)
+    fresh = [call(True) for _ in range(repeat)]
+    kept = [call(False)[0] for _ in range(repeat)]
+    return min(s for s, _ in fresh), min(kept), min(f for _, f in fresh)
 
 
 def main(argv=None) -> int:
@@ -77,7 +105,8 @@ def main(argv=None) -> int:
 
     warm_up_paroct()
     print(f"{'size':>5s} {'model':12s} {'paroct ms':>9s} {'budget ms':>9s} {'needs':>6s} {'floor ms':>8s} "
-          f"{'load':>6s} {'7 rows':>6s} {'cells':>6s} {'floor/budget':>12s}")
+          f"{'load':>6s} {'7 rows':>6s} {'cells':>6s} {'floor/budget':>12s} {'fresh ms':>8s} {'kept ms':>7s} "
+          f"{'faults':>7s}")
     needs = {}
     for model, div in sorted(cases, key=lambda c: (c[1], c[0])):
         ours, peer = ok[("paroct", model, div)], ok[(args.peer, model, div)]
@@ -85,10 +114,11 @@ def main(argv=None) -> int:
         path = next(Path(args.folder).glob(f"{model}.*"))
         load, rays_s, cells = surface_floor(path, ours["size"], args.repeat)
         floor = load + rays_s + cells
+        fresh, kept, faults = heap_cost(path, ours["size"], args.repeat)
         needs.setdefault(div, []).append(ours["seconds"] / budget)
         print(f"/{div:<4g} {model:12s} {1e3 * ours['seconds']:9.1f} {1e3 * budget:9.1f} {needs[div][-1]:6.2f} "
-              f"{1e3 * floor:8.1f} {1e3 * load:6.1f} {1e3 * rays_s:6.1f} {1e3 * cells:6.1f} {floor / budget:12.2f}",
-              flush=True)
+              f"{1e3 * floor:8.1f} {1e3 * load:6.1f} {1e3 * rays_s:6.1f} {1e3 * cells:6.1f} {floor / budget:12.2f} "
+              f"{1e3 * fresh:8.1f} {1e3 * kept:7.1f} {faults:7d}", flush=True)
     for div, values in needs.items():
         half = len(values) // 2 + 1  # more than half of the models
         print(f"/{div:g}: median needs {statistics.median(values):.2f} x; the {half} cheapest of {len(values)} "
