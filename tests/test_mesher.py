@@ -237,6 +237,47 @@ def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_
     assert (f"tried {h / 2}" in result.report.notes) == halving_lost
 
 
+def _cubes_sharing_an_edge(degrees_x: float, degrees_y: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit cubes sharing the edge x = y = 1 as two shells (vertices, faces), turned about
+    x then y (fixed axes)."""
+    corners = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
+    box = manifold3d.Manifold.cube([1, 1, 1]).to_mesh()
+    vertices = np.asarray(box.vert_properties[:, :3], dtype=float)
+    faces = np.asarray(box.tri_verts, dtype=np.int64)
+    assert len(vertices) == 8 and set(map(tuple, vertices)) == set(map(tuple, corners))
+    a, b = np.radians(degrees_x), np.radians(degrees_y)
+    turn_x = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    turn_y = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    both = np.vstack([vertices, vertices + [1.0, 1.0, 0.0]]) @ (turn_y @ turn_x).T
+    return both, np.vstack([faces, faces + 8])
+
+
+def test_halving_stops_where_a_finer_band_joins_touching_parts_more():
+    """Two cubes sharing an edge, turned off the lattice: no size keeps them apart (nothing
+    between them is thinner than the lattice, it is not there), and finer boundaries join
+    them more (a pass at size / 4 has a larger genus).  The halving keeps the pass nearest the
+    input (fewest component and genus differences, then least volume error) instead of going
+    on to min_size, and says why."""
+    cubes = _cubes_sharing_an_edge(30.0, 40.0)
+    surface = load_surface(cubes)
+    h = surface.diagonal / 30
+
+    def distance(report):
+        return abs(report.boundary_components - 2) + report.boundary_genus
+
+    quarter = mesh(surface, size=h / 4, max_size=8 * h, thin_features=False).report  # as mesh(size=h)'s passes
+    result = mesh(surface, size=h)
+    report = result.report
+    assert report.input_components == 2 and report.input_genus == 0
+    assert distance(quarter) > distance(report)  # finer joins more
+    assert report.size < h and report.n_tets < quarter.n_tets
+    assert any("is kept" in w and "touching along an edge" in w for w in report.warnings)
+    tried = [mesh(surface, size=s, max_size=8 * h, thin_features=False).report for s in (h, h / 2)]
+    best = min(tried, key=lambda r: (distance(r), abs(r.volume_error)))
+    assert report.size == best.size and report.n_tets == best.n_tets
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+
+
 @pytest.mark.parametrize("changes_at", [None, 1])
 def test_rounds_at_min_size_stop_once_they_lose_the_same(monkeypatch, changes_at):
     """Once the samples are at min_size (cap = max_depth), rounds that each go a level deeper

@@ -344,6 +344,7 @@ def mesh(
         if progress:
             progress("sizing")
     memory_bound, tried = False, list[float]()  # tried: whole-band sizes below h that a pass lost at
+    best, kept_text = None, ""  # best: the whole-band pass whose boundary is nearest the input's so far
     while True:
         report = _pass_report(surface, field, band, stage_seconds)
         result, lost, advice, walls, report, note = _whole_pass(surface, field, band, asks, budget, report, progress,
@@ -370,6 +371,24 @@ def mesh(
             if why:
                 notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
                 memory_bound = why == LOCAL_MEMORY
+        # Parts touching along an edge or at a point have no wall or gap between them that a
+        # size could resolve: they come out joined at every size, and the finer the band the
+        # more lattice edges join them (two cubes sharing an edge, turned 30 and 40 degrees,
+        # at diag/30: genus 0, 2, 3 at size / 2, / 4, / 8, and 1.36 M tets at the end for
+        # 0.17 M).  A finer pass further from the input's components and genus than the best
+        # before (nearest the input's, then least volume error), with no squarely facing wall
+        # or gap thinner than 2 x size nor missed part to explain it, ends the halving, and
+        # the best pass is returned.
+        distance = _topology_distance(report)
+        if thin_features and best is not None and distance > best[0] and _unexplained(report, walls, band):
+            kept_text = (f"the pass at boundary size {best[4]:.4g} is kept: at {band:.4g} {lost}, further from the "
+                         "input, with no wall or gap thinner than 2 x size to explain it (parts touching along an edge "
+                         "or at a point stay joined at any size); ")
+            _, result, lost, report, band = best
+            advice = ""
+            break
+        if lost and (best is None or (distance, abs(report.volume_error)) < (best[0], abs(best[3].volume_error))):
+            best = (distance, result, lost, report, band)
         # By halves, the coarsest first (skipping the sizes _thin_locally tried): what
         # the rounds near thin places could not keep comes out joined or split at any size,
         # and a coarser band may keep what a finer one loses.  Going straight to two layers
@@ -389,15 +408,30 @@ def mesh(
     report.notes = notes
     if lost:
         floor_text = ""
-        if thin_features and band <= floor * (1 + 1e-9):
+        if kept_text:
+            floor_text = kept_text
+        elif thin_features and band <= floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached; "
         elif thin_features and memory_bound:
             floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
         elif thin_features and band <= whole_floor * (1 + 1e-9):
             floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
         _refuse_losing_too_much(report, band, f"{floor_text}{advice}")  # why it went no finer, then what would keep it
-        report.warnings.append(f"{floor_text}{lost}; {advice}")
+        report.warnings.append(f"{floor_text}{lost}" + (f"; {advice}" if advice else ""))
     return result
+
+
+def _topology_distance(report: MeshReport) -> int:
+    """How far the pass's boundary is from the input's: the differences in components and
+    genus, summed."""
+    return abs(report.boundary_components - report.input_components) + abs(report.boundary_genus - report.input_genus)
+
+
+def _unexplained(report: MeshReport, walls: ThinFeatures | None, band: float) -> bool:
+    """Whether nothing a finer band could resolve explains what the pass at boundary size band
+    lost: no missed part of the surface, and no squarely facing wall or gap (walls: the pass's,
+    _walls_of_loss) thinner than 2 x band."""
+    return not _missed(report) and (walls is None or not walls.thinnest_below(2 * band)[0])
 
 
 def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[FeatureAsks, list[str]]:
