@@ -977,7 +977,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
                    divisions: float | None = None, max_size: float | None = None,
                    mapper: Callable[..., Iterable] | None = None) -> MeshResult:
     """One meshing pass at ``size`` (graded up to max_size, as mesh()) in n_parts ranges of
-    Morton keys (range_bounds, whole max_size octants): in each, the band from the triangles
+    Morton keys (range_bounds, whole max_size octants; ranges left empty, as when they are
+    more than the octants the surface meets, are dropped): in each, the band from the triangles
     near it (band_in_range), the octree from the band within one max_size octant of it
     (octree_in_range), and the tets of its leaves from them, the leaves touching them and the
     band pieces it reads (mesh_range); then merged (merge_ranges) and finished as one mesh
@@ -1011,7 +1012,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     coarse = max(0, frame.levels - field.coarse_depth)  # the seeds' coarsest level: ranges are its octants
-    key_bounds = range_bounds(frame, snapped, n_parts, coarse)
+    # Ranges of whole coarse octants: past one per octant the surface meets, the rest are
+    # empty, and are dropped (10**6 ranges of a 30 k-tet sphere took minutes, 0.6 ms each).
+    key_bounds = np.unique(range_bounds(frame, snapped, n_parts, coarse))
     firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
     band = list(run(partial(band_in_range, frame, snapped, faces), firsts, ends))
     report.unresolved_cuts = unresolved_cuts(band)
