@@ -337,6 +337,17 @@ def test_patch_sizes_by_angle_and_notes(named_box_file):
         paroct.mesh(named_box_file, size=0.2, patch_sizes=3)
 
 
+def test_a_patch_size_memory_cannot_hold_is_not_honoured_and_says_so():
+    """A patch of a unit box asked at 1e-4 at size 0.1, min_size 1e-5: the x rows of the
+    refined frame alone would take GiB (they were crossed before any estimate: 4.2 GiB asked
+    here, 10 GiB on bunny at diag/10 with a patch at 1e-5, and a MemoryError or the machine's
+    memory killer); within max_memory = 200 MiB the pass is made without the ask, and warns."""
+    box = manifold3d.Manifold.cube((1, 1, 1))
+    result = paroct.mesh(box, size=0.1, patch_sizes={"patch_1": 1e-4}, min_size=1e-5, max_memory=200 * 2**20)
+    assert result.report.size == pytest.approx(0.1) and result.report.n_tets > 0
+    assert any("patch 'patch_1' asks 0.0001" in w and "would not fit in memory" in w for w in result.report.warnings)
+
+
 def test_cli_refine_patch(named_box_file, tmp_path, capsys):
     out = tmp_path / "box.vtu"
     assert main(["mesh", str(named_box_file), "--size", "0.1", "--refine-patch", "top", "0.03", "-o", str(out)]) == 0

@@ -49,6 +49,14 @@ DEFAULT_DIVISIONS = 40
 #: diag/1000 (97 M estimated, 61 M made, writing the .msh included), where sessions 2-3 had
 #: measured 196-205 and set 250; smaller meshes read more (to 130) but their totals are small.
 BYTES_PER_TET = 150
+#: Bytes a crossing of a lattice row with the surface takes while FramedSurface.build crosses
+#: the x rows of a refined frame (key, fraction, sign and triangle, 21 bytes, in the fill's
+#: slots and again sorted, and the row index) ...
+CROSSING_BYTES = 64
+#: ... of which there are at most the surface's area times this over h**2: lattice rows of one
+#: direction per unit area across them (det A = 1/2 a cell, a row step |A e_x| = sqrt(3)/2;
+#: the corpus' x rows cross 0.37-0.61 of that at diag/40 and /160).
+ROWS_PER_AREA = 3.0**0.5
 #: Thickness of the finest band in units of size, for the memory estimate (cells met by the
 #: surface plus a ring on each side, times the Freudenthal cell's extent).
 BAND_CELLS = 4
@@ -493,6 +501,8 @@ def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budge
     if frame.levels > MAX_FRAME_LEVELS:
         return f"a frame of {frame.levels} levels is too deep"
     wanted = _asked_levels(coarse, deepest, asks)
+    if not _local_fits(surface, field, wanted, frame, budget):
+        return LOCAL_MEMORY
     framed = FramedSurface.build(surface, frame, coarse.levels)
     result, report, rounds, why = _refine_rounds(surface, field, framed, wanted, budget, progress, stage_seconds)
     if result is None:
@@ -588,6 +598,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
                         f"refining near thin places from {field.size:.4g} instead")
                 notes.append(note)
                 tried_notes.append(note)
+        if not _local_fits(surface, field, wanted, frame, budget):
+            return None, LOCAL_MEMORY, tried, tried_notes
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
             framed, tried_band = FramedSurface.build(surface, frame, coarse.levels), None
         if tried_band is not None and _same_band(framed, tried_band, wanted):
@@ -737,6 +749,15 @@ def _local_tets(surface: Surface, field: SizeField, wanted: BandLevels) -> int:
     depth = wanted.levels.astype(np.int64) - wanted.coarse_level
     local = estimate_tets(surface, field) + int(6 * BAND_CELLS * np.sum(4.0**depth))
     return int(min(local, solid_tets(surface, field.size / 2.0 ** int(depth.max(initial=0)))))
+
+
+def _local_fits(surface: Surface, field: SizeField, wanted: BandLevels, frame: FatFrame, budget: float) -> bool:
+    """Whether a pass with the band refined where wanted asks, in frame (the finest), is
+    estimated within budget bytes: its tets (_local_tets) and, before any tet, the crossings of
+    the frame's x rows with the whole surface (FramedSurface.build; a patch asked at 1e-5 of
+    bunny at diag/10 made it allocate 10 GiB for them)."""
+    rows = surface.area * ROWS_PER_AREA / frame.h**2 * CROSSING_BYTES
+    return _local_tets(surface, field, wanted) * BYTES_PER_TET + rows <= budget
 
 
 def _check_memory(surface: Surface, field: SizeField, budget: float) -> None:
