@@ -329,3 +329,17 @@ def test_boundary_vertices_know_their_surface_triangle(source, divisions):
     tiny = paroct.load_surface(manifold3d.Manifold.tetrahedron())  # 4 triangles: not the meshed surface's
     with pytest.raises(ParoctError, match="belong to another surface"):
         dataclasses.replace(result, surface=tiny).boundary_patches()
+
+
+def test_feature_angles_are_numbers_of_degrees_and_patches_read_any_surface():
+    """numpy integers are angles (np.int64(40) was refused as 'feature angle = 40'); a bool is
+    no angle (True was 1 degree); surface_patches reads what load_surface reads ((vertices,
+    faces) raised AttributeError)."""
+    surface = load_surface(DATA / "xyz_cube.stl")
+    assert np.array_equal(surface_patches(surface, np.int64(40)), surface_patches(surface, 40))
+    assert np.array_equal(surface_patches((surface.vertices, surface.faces), 40), surface_patches(surface, 40))
+    for bad in (True, np.bool_(True), 0, 181, "40", None):
+        with pytest.raises(ParoctError, match="feature angle"):
+            surface_patches(surface, bad)
+    with pytest.raises(ParoctError, match="cannot mesh a NoneType"):
+        surface_patches(None)

@@ -1,5 +1,6 @@
 """End-to-end properties of paroct.mesh on the bundled parts and constructed solids."""
 
+import warnings
 from pathlib import Path
 
 import manifold3d
@@ -458,6 +459,11 @@ def test_size_checks():
     (dict(divisions=12, progress=1), r"progress = 1: must be a function"),
     (dict(size=0.1, divisions=8), r"size = 0.1 and divisions = 8: give one"),
     (dict(divisions=12, thin_features="no"), r"thin_features = 'no': must be True or False"),
+    (dict(divisions=12, max_memory=-10**400), r"max_memory = -10000000\.\.\. \(401 digits\): must be a positive"),
+    (dict(divisions=12, regions=[paroct.Sphere((0, 0, 0), np.array([0.1, 0.2]), 1)]),
+     r"refinement sphere radius = array\(\[0\.1, 0\.2\]\): must be a positive number"),
+    (dict(divisions=12, regions=[paroct.Sphere((0, 0, 0), False, 1)]), r"refinement sphere radius = False"),
+    (dict(size=0.1, min_size=0.2), r"min_size = 0\.2 must be at most size = 0\.1"),
     (dict(divisions=12, regions=[paroct.Box((0, 0, 1), (1, 1, 0), 1)]), r"lo = \(0, 0, 1\) exceeds hi = \(1, 1, 0\)"),
 ])
 def test_options_of_the_wrong_kind_are_refused_by_name(options, match):
@@ -465,6 +471,23 @@ def test_options_of_the_wrong_kind_are_refused_by_name(options, match):
     TypeError from deep inside, nor a mesh of something else)."""
     with pytest.raises(ParoctError, match=match):
         mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), **options)
+
+
+def test_a_sphere_past_every_part_asks_its_size_everywhere():
+    """A refinement sphere of radius 1e200 around the box asks its size on the whole box, as
+    one of radius 10 does (its squared radius overflowed: OverflowError); a centre 1e300 away
+    asks nothing, without overflow warnings."""
+    box = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+
+    def tets(*regions):
+        return mesh(box, size=0.2, regions=list(regions), thin_features=False).report.n_tets
+
+    near = tets(paroct.Sphere((0, 0, 0), 10.0, 0.1))
+    assert tets(paroct.Sphere((0, 0, 0), 1e200, 0.1)) == near
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        far = tets(paroct.Sphere((1e300, 0, 0), 1.0, 0.1))
+    assert far == tets() < near
 
 
 def test_numpy_numbers_and_unbounded_memory_are_accepted():

@@ -275,6 +275,16 @@ def test_ranges_past_the_octants_the_surface_meets_are_dropped():
     assert 1 <= max(calls) < 1000
     for got, want in zip(_canonical(ranged), _canonical(whole)):
         assert np.array_equal(got, want)
+    # Past one range a surface vertex the bounds repeat: 10**30 ranges are those, with no
+    # array of 10**30 bounds (numpy's "maximum allowed dimension exceeded" before).
+    for got, want in zip(_canonical(mesh_in_ranges(sphere, 0.1, n_parts=10**30)), _canonical(whole)):
+        assert np.array_equal(got, want)
+
+
+def test_ranges_refuse_both_size_and_divisions_as_mesh_does():
+    with pytest.raises(paroct.ParoctError, match=r"size = 0.1 and divisions = 10: give one"):
+        mesh_in_ranges(DATA / "bunny.stl", 0.1, divisions=10, n_parts=2)
+
 
 @pytest.mark.parametrize("n_parts", [0, -2, 2.5, True, "3"])
 def test_a_range_count_that_is_no_whole_number_is_refused_in_one_line(n_parts):

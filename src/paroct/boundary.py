@@ -29,6 +29,7 @@ import numpy as np
 from .check import nearest_triangles, validated_mesh
 from .errors import ParoctError
 from .features import face_normals
+from .sizing import is_number
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import face_owners, half_edge_twins, match_faces, tet_faces_of, union, used_vertices, vertex_stars
 
@@ -84,17 +85,19 @@ class BoundaryPatches:
 
 def checked_feature_angle(feature_angle: float) -> float:
     """feature_angle, or ParoctError unless it is a number of degrees in (0, 180]."""
-    if not (isinstance(feature_angle, (int, float, np.floating)) and 0 < feature_angle <= 180):
+    if not (is_number(feature_angle) and 0 < feature_angle <= 180):
         raise ParoctError(f"feature angle = {feature_angle}: must be a number of degrees in (0, 180]")
     return feature_angle
 
 
-def surface_patches(surface: Surface, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> np.ndarray:
-    """Patch id (F,) int32 of each of the surface's triangles: triangles joined across every
-    edge where their unit normals differ by less than ``feature_angle`` degrees (0 < angle <=
-    180), numbered 1, 2, ... in the order of each patch's first triangle.  A triangle of zero
-    area has no normal: it joins the patch across its longest edge."""
+def surface_patches(surface: Surface | SurfaceSource, feature_angle: float = DEFAULT_FEATURE_ANGLE) -> np.ndarray:
+    """Patch id (F,) int32 of each of the surface's triangles (a Surface, or what
+    load_surface reads): triangles joined across every edge where their unit normals differ
+    by less than ``feature_angle`` degrees (0 < angle <= 180), numbered 1, 2, ... in the order
+    of each patch's first triangle.  A triangle of zero area has no normal: it joins the
+    patch across its longest edge."""
     checked_feature_angle(feature_angle)
+    surface = surface if isinstance(surface, Surface) else load_surface(surface)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
     vertices = np.ascontiguousarray(surface.vertices, dtype=np.float64)
     return _patches(vertices, faces, face_normals(vertices, faces), math.cos(math.radians(feature_angle)))

@@ -332,6 +332,9 @@ def mesh(
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function, curvature, layers, patch_sizes)
     floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
+    if floor > h:
+        raise ParoctError(f"min_size = {floor:.6g} must be at most size = {h:.6g}: it is the finest boundary size "
+                          "refinement near thin places may reach")
     floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
     whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
     budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)

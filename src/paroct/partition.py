@@ -999,6 +999,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
     if mapper is not None and not callable(mapper):
         raise ParoctError(f"mapper = {mapper!r}: must be a function like map(function, *iterables), or None")
+    if size is not None and divisions is not None:
+        raise ParoctError(f"size = {size!r} and divisions = {divisions!r}: give one (size = diagonal / divisions)")
     run = map if mapper is None else mapper
     n_parts = int(n_parts)
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
@@ -1014,7 +1016,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     coarse = max(0, frame.levels - field.coarse_depth)  # the seeds' coarsest level: ranges are its octants
     # Ranges of whole coarse octants: past one per octant the surface meets, the rest are
     # empty, and are dropped (10**6 ranges of a 30 k-tet sphere took minutes, 0.6 ms each).
-    key_bounds = np.unique(range_bounds(frame, snapped, n_parts, coarse))
+    # Past one range a surface vertex the bounds repeat (range_bounds splits by them): the same
+    # ranges, with no array of n_parts bounds (10**30 ranges).
+    key_bounds = np.unique(range_bounds(frame, snapped, min(n_parts, snapped.shape[0] + 1), coarse))
     firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
     band = list(run(partial(band_in_range, frame, snapped, faces), firsts, ends))
     report.unresolved_cuts = unresolved_cuts(band)

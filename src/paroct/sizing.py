@@ -33,7 +33,7 @@ class Box:
     def distance(self, points: np.ndarray) -> np.ndarray:
         """Euclidean distance (N,) of points (N, 3) to the box, 0 inside."""
         gap = np.maximum(np.asarray(self.lo) - points, 0) + np.maximum(points - np.asarray(self.hi), 0)
-        return np.sqrt((gap**2).sum(axis=1))
+        return _length(gap)
 
 
 @dataclass(frozen=True)
@@ -45,25 +45,43 @@ class Sphere:
     size: float
 
     def distance(self, points: np.ndarray) -> np.ndarray:
-        return np.maximum(np.sqrt(((points - np.asarray(self.center)) ** 2).sum(axis=1)) - self.radius, 0.0)
+        """Euclidean distance (N,) of points (N, 3) to the ball, 0 inside."""
+        return np.maximum(_length(points - np.asarray(self.center)) - self.radius, 0.0)
+
+
+def _length(vectors: np.ndarray) -> np.ndarray:
+    """Euclidean length (N,) of vectors (N, 3), without overflow for components up to 1e308
+    (a centre 1e300 away is that far, not inf)."""
+    return np.hypot(np.hypot(vectors[:, 0], vectors[:, 1]), vectors[:, 2])
 
 
 Region = Box | Sphere
 SizeFunction = Callable[[np.ndarray], np.ndarray]
 
 
+def is_number(value) -> bool:
+    """Whether value is a real number: an int, float or numpy scalar, not a bool."""
+    return not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, float, np.integer, np.floating))
+
+
 def positive_number(name: str, value, *, infinite: bool = False) -> float:
-    """value as a float: a real number (an int, float or numpy scalar, not a bool), positive
-    and finite (or +inf where ``infinite``); else ParoctError naming the option."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ParoctError(f"{name} = {value!r}: must be a positive number")
+    """value as a float: a real number (is_number), positive and finite (or +inf where
+    ``infinite``); else ParoctError naming the option."""
+    if not is_number(value):
+        raise ParoctError(f"{name} = {_shown(value)}: must be a positive number")
     try:
         number = float(value)
-    except OverflowError:
-        number = float("inf")
+    except OverflowError:  # an int past float's range: its sign decides
+        number = float("inf") if value > 0 else float("-inf")
     if not (number > 0 and (np.isfinite(number) or (infinite and number == np.inf))):
-        raise ParoctError(f"{name} = {value!r}: must be a positive number")
+        raise ParoctError(f"{name} = {_shown(value)}: must be a positive number")
     return number
+
+
+def _shown(value) -> str:
+    """repr(value), an int of hundreds of digits cut short (10**400: '10000000...', 401 digits)."""
+    text = repr(value)
+    return f"{text[:9]}... ({len(text.lstrip('-'))} digits)" if len(text) > 40 and is_number(value) else text
 
 
 def _point(name: str, value) -> np.ndarray:
@@ -127,7 +145,7 @@ def size_field(size: float, max_size: float | None = None, regions: Sequence[Reg
                 raise ParoctError(f"refinement box lo = {r.lo} exceeds hi = {r.hi} in a coordinate (lo must be at most hi)")
         else:
             _point("refinement sphere center", r.center)
-            if r.radius != 0:
+            if not (is_number(r.radius) and r.radius == 0):  # radius 0: the sphere's centre alone
                 positive_number("refinement sphere radius", r.radius)
     if function is not None and not callable(function):
         raise ParoctError("size_function must be callable: (N, 3) points -> (N,) sizes")
@@ -180,7 +198,10 @@ def _required_size(field: SizeField, keys: np.ndarray, level: int, frame: FatFra
             meets = np.all((lo <= np.asarray(r.hi)) & (hi >= np.asarray(r.lo)), axis=1)
         else:
             gap = np.maximum(lo - np.asarray(r.center), 0) + np.maximum(np.asarray(r.center) - hi, 0)
-            meets = (gap**2).sum(axis=1) <= r.radius**2
+            with np.errstate(over="ignore"):  # a centre 1e300 away is inf away: not met
+                # A radius past 1e150 holds every part (coordinates reach 1e100); its square
+                # would overflow.
+                meets = (gap**2).sum(axis=1) <= min(float(r.radius), 1e150) ** 2
         need[meets] = np.minimum(need[meets], r.size)
     if field.function is not None and keys.shape[0]:
         values = evaluated_size_function(field.function, samples.reshape(-1, 3), "points")
