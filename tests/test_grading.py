@@ -319,6 +319,8 @@ def test_regions_and_size_function_refine_where_asked():
     ({"regions": ["box"]}, "Box or Sphere"),
     ({"size_function": lambda x: np.ones(3)}, "shape"),
     ({"size_function": lambda x: -np.ones(len(x))}, "non-positive"),
+    ({"size_function": lambda x: np.where(x[:, 0] > 0.5, np.nan, 0.2)},
+     r"non-positive or NaN size, nan at \(0\.\d+, -?[\d.e-]+, -?[\d.e-]+\), one of the points"),
     ({"size_function": lambda x: 1 / 0}, "size_function failed"),
 ])
 def test_size_control_errors_are_one_line(kwargs, match):

@@ -239,6 +239,19 @@ def test_layers_refine_a_thin_slab():
     assert abs(result.report.volume_error) < 0.01
 
 
+def test_layers_past_min_size_ask_nothing_and_say_so():
+    """The slab (1.2 thick, 8 wide) at size 1 with 1000 layers would need 7-10 levels below
+    size, past the 4 that the default min_size (size / 16) allows: nothing is asked, the mesh
+    is the one without layers, and a note says why (it said nothing: fuzzing took layers=160
+    on a cube for ignored)."""
+    slab = manifold3d.Manifold.cube((8, 8, 1.2))
+    plain = paroct.mesh(slab, size=1.0)
+    many = paroct.mesh(slab, size=1.0, layers=1000)
+    assert np.array_equal(plain.mesh.tets, many.mesh.tets)
+    assert any("walls thinner than 1000 x size = 1000 would need more than the 4 levels below size that min_size "
+               "allows: not asked" in note for note in many.report.notes)
+
+
 def test_nothing_asked_leaves_the_mesh_unchanged():
     """A box has no curvature and no wall thinner than 2 x size: the same mesh as without."""
     box = manifold3d.Manifold.cube((4, 5, 6))

@@ -564,24 +564,28 @@ def _lower_bound(group_patch, group_cell, patch, cell):
     return lo
 
 
-def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -> FeatureAsks:
+def wall_asks(walls: ThinFeatures, size: float, layers: float, max_depth: int) -> tuple[FeatureAsks, list[str]]:
     """Asks for layers elements across each wall sample (is_wall, thickness t > 0) thinner than
     layers * size: depth ceil(log2(layers * size / t)), with the ring of one coarse cell (the
     samples lie on the wall's first side, a lattice row apart).  Walls that would need more
     than max_depth levels cannot have their layers: they are left to the thin-wall rounds,
     which refine near them only if the mesh loses them (asked to max_depth, a sliver of a CSG
-    part 1e-7 thick came apart into more boundary components than the input's)."""
+    part 1e-7 thick came apart into more boundary components than the input's), and a note
+    says so.  Returns the asks and the notes."""
     if max_depth < 1:
-        return no_asks()
+        return no_asks(), []
     need = np.full(walls.thickness.shape[0], max_depth + 1, dtype=np.int64)
     measured = walls.is_wall & (walls.thickness > 0) & (walls.thickness < layers * size)
     need[measured] = np.maximum(np.ceil(np.log2(layers * size / walls.thickness[measured]) - 1e-9), 1)
     thin = np.flatnonzero(need <= max_depth)
+    too_deep = int(np.count_nonzero(measured & (need > max_depth)))
+    notes = [f"{too_deep} samples of walls thinner than {layers:g} x size = {layers * size:.4g} would need more "
+             f"than the {max_depth} levels below size that min_size allows: not asked"] if too_deep else []
     if thin.size == 0:
-        return no_asks()
+        return no_asks(), notes
     return FeatureAsks(walls.points[thin], need[thin], np.ones(thin.size, dtype=np.int64),
                        f"{thin.size} samples of walls thinner than {layers:g} x size = {layers * size:.4g} "
-                       f"(thinnest {walls.thickness[thin].min():.4g})")
+                       f"(thinnest {walls.thickness[thin].min():.4g})"), notes
 
 
 def patch_asks(surface: Surface, frame: FatFrame, patch_sizes: tuple, max_depth: int,

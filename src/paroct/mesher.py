@@ -469,7 +469,8 @@ def _feature_asks(surface: Surface, field: SizeField, floor: float) -> tuple[Fea
                                                 cut))
     if field.layers is not None:
         walls = surface_thin_features(surface, coarse).facing_below(THIN_FACING)
-        asks = merged_asks(asks, wall_asks(walls, field.size, field.layers, max_depth))
+        found, found_notes = wall_asks(walls, field.size, field.layers, max_depth)
+        asks, notes = merged_asks(asks, found), notes + found_notes
     return asks, notes
 
 

@@ -221,7 +221,11 @@ def evaluated_size_function(function, points: np.ndarray, what: str) -> np.ndarr
         raise ParoctError(f"size_function returned shape {values.shape} for {points.shape[0]} {what}; "
                           f"expected ({points.shape[0]},)")
     if not np.all(values > 0):
-        raise ParoctError("size_function returned a non-positive or NaN size")
+        bad = int(np.argmin(np.where(values > 0, np.inf, 0.0)))  # the first non-positive or NaN one
+        x, y, z = points[bad]
+        raise ParoctError(f"size_function returned a non-positive or NaN size, {values[bad]:.4g} at ({x:.4g}, "
+                          f"{y:.4g}, {z:.4g}), one of the {what} (it is sampled around the part too, up to about "
+                          "max_size beyond it)")
     return values
 
 
