@@ -981,8 +981,10 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     more than the octants the surface meets, are dropped): in each, the band from the triangles
     near it (band_in_range), the octree from the band within one max_size octant of it
     (octree_in_range), and the tets of its leaves from them, the leaves touching them and the
-    band pieces it reads (mesh_range); then merged (merge_ranges) and finished as one mesh
-    (pinch repair, quality, compaction).  No band or octree of the whole surface is built.
+    band pieces it reads (mesh_range); their pinches repaired in the ranges (range_pinches:
+    only the boundary faces and the tets near pinches leave them), then merged (merge_ranges)
+    and finished as one mesh (quality, topology, compaction).  No band or octree of the whole
+    surface is built.
 
     mapper(function, *iterables): runs each of the three stages over the ranges and returns
     their results in order, as the built-in map does (the default: one range after another);
