@@ -281,6 +281,22 @@ def test_ranges_past_the_octants_the_surface_meets_are_dropped():
         assert np.array_equal(got, want)
 
 
+@pytest.mark.parametrize("mapper, match", [
+    (lambda f, *its: list(map(f, *its))[::-1], "out of place"),  # completion order, say
+    (lambda f, *its: list(map(f, *its))[:-1], r"returned 3 results for 4 ranges"),
+    (lambda f, *its: list(map(f, *its)) * 2, r"returned 8 results for 4 ranges"),
+    (lambda f, *its: [object() for _ in zip(*its)], "returned 'object' results where BandPiece was due"),
+    (lambda f, *its: None, "mapper\\(function, \\*iterables\\) failed"),
+    (lambda f: [], "mapper\\(function, \\*iterables\\) failed"),
+])
+def test_a_mapper_that_is_not_map_is_refused_in_one_line(mapper, match):
+    """A mapper's results that are not map's (out of order, too few or many, not the results
+    themselves: a Dask client's map without gather) gave AssertionErrors of the merge or
+    TypeErrors from inside; now a ParoctError says what the mapper did."""
+    with pytest.raises(paroct.ParoctError, match=match):
+        mesh_in_ranges(DATA / "bunny.stl", divisions=15, n_parts=4, mapper=mapper)
+
+
 def test_ranges_refuse_both_size_and_divisions_as_mesh_does():
     with pytest.raises(paroct.ParoctError, match=r"size = 0.1 and divisions = 10: give one"):
         mesh_in_ranges(DATA / "bunny.stl", 0.1, divisions=10, n_parts=2)

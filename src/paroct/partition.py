@@ -1022,13 +1022,15 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     # ranges, with no array of n_parts bounds (10**30 ranges).
     key_bounds = np.unique(range_bounds(frame, snapped, min(n_parts, snapped.shape[0] + 1), coarse))
     firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
-    band = list(run(partial(band_in_range, frame, snapped, faces), firsts, ends))
+    band = _mapped(run, partial(band_in_range, frame, snapped, faces), firsts, ends, kind=BandPiece)
+    _in_order([p.surface_keys for p in band], firsts, ends)
     report.unresolved_cuts = unresolved_cuts(band)
     # Each range's octree reads the band and surface cells within one max_size octant of it.
     near_surface = keys_near_ranges(np.concatenate([p.surface_keys for p in band]), coarse, key_bounds)
     near_band = keys_near_ranges(np.concatenate([p.band_keys for p in band]), coarse, key_bounds)
-    octrees = list(run(partial(octree_in_range, frame, snapped, faces, surface, field), near_surface, near_band,
-                       firsts, ends))
+    octrees = _mapped(run, partial(octree_in_range, frame, snapped, faces, surface, field), near_surface, near_band,
+                      firsts, ends, kind=tuple)
+    _in_order([leaves for leaves, _ in octrees], firsts, ends)
     keys = np.concatenate([leaves for leaves, _ in octrees])
     levels = np.concatenate([leaf_levels for _, leaf_levels in octrees])
     report.n_leaves, report.leaf_levels = int(keys.shape[0]), _leaf_levels(frame, levels)
@@ -1036,8 +1038,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     if keys.shape[0] == 0:
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
     bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
-    pieces = list(run(partial(_range_task, mesh_range, frame),
-                      range_shares(frame, keys, levels, key_bounds, band, bounds)))
+    pieces = _mapped(run, partial(_range_task, mesh_range, frame),
+                     range_shares(frame, keys, levels, key_bounds, band, bounds), kind=RangeMesh, count=len(firsts))
     stages.done("stuff")
     numbering = number_ranges(pieces, frame, key_bounds)
     # The pinches are repaired in the ranges (range_pinches): the merged mesh is only checked.
@@ -1059,8 +1061,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         # As mesh(): stuffed again with every tet measured and other warps tried near the bad
         # ones, here over the ranges' lattice tets joined into one lattice.
         restore_report(report, fresh)
-        lattices = list(run(partial(_range_task, range_lattice, frame),
-                            range_shares(frame, keys, levels, key_bounds, band, bounds)))
+        lattices = _mapped(run, partial(_range_task, range_lattice, frame),
+                           range_shares(frame, keys, levels, key_bounds, band, bounds), kind=RangeLattice,
+                           count=len(firsts))
         coords, lattice_tets, inside, cuts, targets, first_centre = merge_range_lattices(lattices,
                                                                                          BandIndex.from_pieces(band))
         lattice_points = frame.to_space(coords)
@@ -1079,6 +1082,34 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
         report.warnings.append(f"{lost} (thin walls are not refined in ranges)")
     return result
+
+
+def _mapped(run: Callable[..., Iterable], function: Callable, *iterables, kind: type, count: int | None = None) -> list:
+    """run(function, *iterables) as a list, or ParoctError unless it is what map gives: one
+    result a range (count, or the length of the first iterable), each a ``kind`` (a mapper
+    handing back futures, say, instead of gathering them)."""
+    try:
+        results = list(run(function, *iterables))
+    except TypeError as err:
+        raise ParoctError(f"mapper(function, *iterables) failed: {err}; it must work as map does") from None
+    expected = len(iterables[0]) if count is None else count
+    if len(results) != expected:
+        raise ParoctError(f"mapper returned {len(results)} results for {expected} ranges: it must return one result a "
+                          "range, in order, as map does")
+    wrong = next((r for r in results if not isinstance(r, kind)), None)
+    if wrong is not None:
+        raise ParoctError(f"mapper returned {type(wrong).__name__!r} results where {kind.__name__} was due: it must "
+                          "return the results themselves, in order, as map does")
+    return results
+
+
+def _in_order(keys: Sequence[np.ndarray], firsts: list[int], ends: list[int]) -> None:
+    """ParoctError unless each range's result holds keys of its own range [firsts[r], ends[r])
+    only (a mapper that returns results out of order)."""
+    for r, held in enumerate(keys):
+        if held.shape[0] and not (firsts[r] <= held[0] and held[-1] < ends[r]):
+            raise ParoctError(f"mapper returned range {r}'s result out of place: it must return the results in "
+                              "order, as map does")
 
 
 @dataclass(frozen=True)
