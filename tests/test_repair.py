@@ -246,9 +246,11 @@ def test_pinch_repair_follows_the_points_not_the_numbering(seed):
 @pytest.mark.parametrize("seed", range(6))
 def test_pinches_repaired_in_ranges_are_the_whole_meshs(seed):
     """The two pinched blocks' tets cut into ranges at random rows, each range's points
-    numbered its own way: the repair in ranges (range_pinches) keeps exactly the tets that
-    remove_pinches keeps of the whole mesh, and the boundary it finds is the whole mesh's."""
-    from paroct.range_pinches import RangeTets, boundary_of_ranges, range_boundary, repair_pinches_in_ranges
+    numbered its own way and each point owned by a random range: the boundary and pinches the
+    owners find (range_pinches.pinches_by_owners) are the whole mesh's, and the repair in
+    ranges keeps exactly the tets that remove_pinches keeps of the whole mesh."""
+    from paroct.range_pinches import (RangeTets, boundary_of_ranges, pinched_vertices, pinches_by_owners,
+                                      range_boundary, repair_pinches_in_ranges)
 
     rng = np.random.default_rng(seed)
     tets_a, core_a = _pinched_block(seed, n=8, within=5)
@@ -260,14 +262,19 @@ def test_pinches_repaired_in_ranges_are_the_whole_meshs(seed):
     core = np.concatenate([core_a, core_b])
     points = np.concatenate([points_a, points_b])
     cuts = np.sort(rng.choice(np.arange(1, len(tets)), size=int(rng.integers(1, 7)), replace=False))
+    owner_of = rng.integers(0, len(cuts) + 1, size=len(points))  # a function of the point
     parts = []
     for rows in np.split(np.arange(len(tets)), cuts):
         ids = rng.permutation(np.unique(tets[rows]))
         local = np.argsort(ids)[np.searchsorted(ids[np.argsort(ids)], tets[rows])].astype(np.int32)
-        parts.append(RangeTets(ids.astype(np.int64), local, core[ids], points[ids]))
-    assert _face_set(boundary_of_ranges([range_boundary(p) for p in parts])) == \
-        _face_set(stuffed_boundary(tets, core))
-    kept = repair_pinches_in_ranges(parts)
+        parts.append(RangeTets(ids.astype(np.int64), local, core[ids], points[ids], owner_of[ids]))
+    boundaries = [range_boundary(p) for p in parts]
+    whole = stuffed_boundary(tets, core)
+    assert _face_set(boundary_of_ranges([faces for faces, _ in boundaries])) == _face_set(whole)
+    bad = np.flatnonzero(nonmanifold_vertices(whole, len(core)))
+    assert bad.size and np.array_equal(pinches_by_owners(boundaries, len(parts)), bad)
+    assert np.array_equal(pinched_vertices(whole), bad)
+    kept = repair_pinches_in_ranges(parts, len(parts))
     assert kept is not None
     out, removed, _, _ = remove_pinches(tets.copy(), core.copy(), points)
     got = np.concatenate([p.ids[p.tets[k]] for p, k in zip(parts, kept)])

@@ -899,35 +899,39 @@ def owned_ids(keys: Sequence[np.ndarray], owners: Sequence[np.ndarray], n_ranges
 class RangeNumbering:
     """The mesh's ids of the ranges' points (number_ranges): vertex_ids[r] (V_r,) of piece r's
     lattice vertices, 0..n_vertices-1; edge_ids[r] of its edges (its cut points', then those
-    its vertices warp onto), 0..n_edges-1, the cut points being points n_vertices + those."""
+    its vertices warp onto), 0..n_edges-1, the cut points being points n_vertices + those;
+    vertex_owners[r], edge_owners[r]: the range owning each (point_owners)."""
 
     vertex_ids: list[np.ndarray]
     edge_ids: list[np.ndarray]
     n_vertices: int
     n_edges: int
+    vertex_owners: list[np.ndarray]
+    edge_owners: list[np.ndarray]
 
 
 def number_ranges(pieces: Sequence[RangeMesh], frame: FatFrame, key_bounds: np.ndarray) -> RangeNumbering:
     """Each lattice vertex and each cut point numbered once, by the ranges that own them
     (point_owners, owned_ids): in range order, and by key within a range."""
     n_ranges = key_bounds.shape[0] - 1
-    vertex_ids, n_vertices = owned_ids([p.vertex_keys for p in pieces],
-                                       [point_owners(frame, unpack_coords(p.vertex_keys), key_bounds) for p in pieces],
-                                       n_ranges)
+    vertex_owners = [point_owners(frame, unpack_coords(p.vertex_keys), key_bounds) for p in pieces]
+    vertex_ids, n_vertices = owned_ids([p.vertex_keys for p in pieces], vertex_owners, n_ranges)
     # A piece's edges: those of its cut points, then those its vertices warp onto.
     edges = [np.concatenate([p.cut_keys, p.target_keys[p.target_keys >= 0]]) for p in pieces]
-    edge_ids, n_edges = owned_ids(edges, [point_owners(frame, unpack_coords(e) >> 1, key_bounds) for e in edges],
-                                  n_ranges)
-    return RangeNumbering(vertex_ids, edge_ids, n_vertices, n_edges)
+    edge_owners = [point_owners(frame, unpack_coords(e) >> 1, key_bounds) for e in edges]
+    edge_ids, n_edges = owned_ids(edges, edge_owners, n_ranges)
+    return RangeNumbering(vertex_ids, edge_ids, n_vertices, n_edges, vertex_owners, edge_owners)
 
 
-def range_tets(piece: RangeMesh, vertex_ids: np.ndarray, edge_ids: np.ndarray, n_vertices: int) -> RangeTets:
-    """A range's tets in the mesh's point ids (number_ranges' vertex_ids, edge_ids and
-    n_vertices of the piece), for the pinch repair in ranges (range_pinches)."""
+def range_tets(piece: RangeMesh, numbering: RangeNumbering, r: int) -> RangeTets:
+    """Range r's tets (piece) in the mesh's point ids (numbering), for the pinch repair in
+    ranges (range_pinches)."""
     n, n_cut = piece.vertex_keys.shape[0], piece.cut_keys.shape[0]
     core = np.zeros(n + n_cut, dtype=bool)
     core[:n] = piece.inside & (piece.target_keys < 0)  # mesher._core's, over the piece's points
-    return RangeTets(np.concatenate([vertex_ids, n_vertices + edge_ids[:n_cut]]), piece.tets, core, piece.points)
+    ids = np.concatenate([numbering.vertex_ids[r], numbering.n_vertices + numbering.edge_ids[r][:n_cut]])
+    owners = np.concatenate([numbering.vertex_owners[r], numbering.edge_owners[r][:n_cut]])
+    return RangeTets(ids, piece.tets, core, piece.points, owners)
 
 
 def merge_ranges(pieces: list[RangeMesh], frame: FatFrame, key_bounds: np.ndarray,
@@ -1043,9 +1047,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     stages.done("stuff")
     numbering = number_ranges(pieces, frame, key_bounds)
     # The pinches are repaired in the ranges (range_pinches): the merged mesh is only checked.
-    parts = [range_tets(p, v, e, numbering.n_vertices)
-             for p, v, e in zip(pieces, numbering.vertex_ids, numbering.edge_ids)]
-    kept = repair_pinches_in_ranges(parts)
+    parts = [range_tets(p, numbering, r) for r, p in enumerate(pieces)]
+    kept = repair_pinches_in_ranges(parts, len(parts))
     removed, bared = 0, None  # bared: the vertices of removed tets
     if kept is not None:
         bared = np.zeros(numbering.n_vertices + numbering.n_edges, dtype=bool)

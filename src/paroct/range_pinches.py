@@ -1,19 +1,21 @@
 """Pinch repair of a stuffed mesh held in ranges (partition.mesh_in_ranges): each range keeps
-its tets, and only what lies near the boundary or a pinch leaves it.
+its tets, and only what lies on the boundary or near a pinch leaves it.
 
 1. Each range finds the faces of its tets that can lie on the mesh boundary and that no other
    tet of it has (range_boundary): its part of the boundary, and the faces it shares with
    other ranges.
-2. Joined, the faces that no other range has are the mesh boundary (boundary_of_ranges), and
-   its non-manifold vertices are the pinches (pinched_vertices), as repair.remove_pinches
-   finds them on the whole mesh.
+2. Each such face goes to the range owning its smallest vertex id, which drops those that
+   two ranges sent (boundary_of_ranges over what it received): the rest are the boundary.
+   Each boundary face then goes to the owners of its vertices, and each owner finds which of
+   its vertices are not manifold (pinched_vertices): the pinches, as repair.remove_pinches
+   finds them on the whole mesh (pinches_by_owners).
 3. Each range gives the tets around the pinches (tets_near, out to repair.PINCH_RINGS rings),
    which are repaired cluster by cluster (repair.repair_near_pinches), and drops those
    removed.
 
-So the repair moves the boundary faces and the tets near pinches, never a range's whole mesh;
-the joins are lists here, one exchange each between workers.  The kept tets are the ones
-remove_pinches keeps of the ranges' tets joined in range order (tests/test_partition.py).
+So no range's whole mesh moves, and the boundary is never in one place; here a send is a
+list append, between workers each step is one exchange.  The kept tets are the ones
+remove_pinches keeps of the ranges' tets joined in range order (tests/test_repair.py).
 """
 
 from __future__ import annotations
@@ -21,10 +23,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
+import numba as nb
 import numpy as np
 
 from .repair import PINCH_RINGS, repair_near_pinches, stuffed_boundary, unmatched_faces
-from .topology import local_vertex_ids, nonmanifold_of_fans, touching, vertex_fans
+from .topology import nonmanifold_of_fans, touching, vertex_fans
 
 
 @dataclass(frozen=True)
@@ -32,40 +35,133 @@ class RangeTets:
     """One range's stuffed tets with what the repair reads of their points.  ids (K,) int64:
     the mesh's id of each of the range's points; tets (M, 4) int32 into ids; core (K,) bool:
     the points whose faces are all interior (unwarped inside lattice vertices; see
-    repair.stuffed_boundary); points (K, 3) float64 their positions."""
+    repair.stuffed_boundary); points (K, 3) float64 their positions; owners (K,) int64 the
+    range owning each (0..n_ranges-1, a function of the point: every range holding it agrees)."""
 
     ids: np.ndarray
     tets: np.ndarray
     core: np.ndarray
     points: np.ndarray
+    owners: np.ndarray
 
     def __post_init__(self):
         k = self.ids.shape[0]
-        if self.tets.ndim != 2 or self.tets.shape[1] != 4 or self.core.shape != (k,) or self.points.shape != (k, 3):
+        if self.tets.ndim != 2 or self.tets.shape[1] != 4 or self.core.shape != (k,) or self.points.shape != (k, 3) \
+                or self.owners.shape != (k,):
             raise ValueError(f"len(ids) = {k}, tets.shape = {self.tets.shape}, core.shape = {self.core.shape}, "
-                             f"points.shape = {self.points.shape}; expected (M, 4), ({k},) and ({k}, 3)")
+                             f"points.shape = {self.points.shape}, owners.shape = {self.owners.shape}; expected "
+                             f"(M, 4), ({k},), ({k}, 3) and ({k},)")
 
 
-def range_boundary(part: RangeTets) -> np.ndarray:
+def range_boundary(part: RangeTets) -> tuple[np.ndarray, np.ndarray]:
     """Faces (F, 3) int64 (mesh ids, oriented outward) of the range's tets that have no core
     vertex and that no other tet of the range has: its part of the mesh boundary and the faces
-    it shares with other ranges."""
-    return part.ids[stuffed_boundary(part.tets, part.core)]
+    it shares with other ranges; and the owner (F, 3) of each of their vertices."""
+    faces = stuffed_boundary(part.tets, part.core)
+    return part.ids[faces], part.owners[faces]
 
 
 def boundary_of_ranges(faces: Sequence[np.ndarray]) -> np.ndarray:
-    """The mesh boundary (F, 3): the faces of the ranges' boundaries (range_boundary's, in
-    range order) whose vertex set no other range's has."""
+    """The mesh boundary (F, 3) joined in one place: the faces of the ranges' boundaries
+    (range_boundary's faces, in range order) whose vertex set no other range's has."""
     joined = np.concatenate([np.zeros((0, 3), dtype=np.int64)] + [np.asarray(f, dtype=np.int64) for f in faces])
-    local, vertex_of = local_vertex_ids(joined)
-    return np.compress(unmatched_faces(local, vertex_of.shape[0]), joined, axis=0)
+    return np.compress(_unmatched(joined), joined, axis=0)
 
 
 def pinched_vertices(boundary: np.ndarray) -> np.ndarray:
     """The boundary's (F, 3) non-manifold vertices (ascending mesh ids): those whose faces do
     not form one fan (topology.nonmanifold_vertices)."""
-    local, vertex_of = local_vertex_ids(np.asarray(boundary, dtype=np.int64))
-    return np.sort(vertex_of[nonmanifold_of_fans(vertex_fans(local, vertex_of.shape[0]))])
+    vertex_of, local = _compact_ids(boundary)
+    return np.sort(vertex_of[_nonmanifold(local, vertex_of.shape[0])])
+
+
+def _nonmanifold(local: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Mask (n_vertices,) of the non-manifold vertices of faces (F, 3) in ids 0..n_vertices-1."""
+    return nonmanifold_of_fans(vertex_fans(local, n_vertices))
+
+
+def pinches_by_owners(boundaries: Sequence[tuple[np.ndarray, np.ndarray]], n_ranges: int) -> np.ndarray:
+    """The pinches (ascending mesh ids) from the ranges' boundaries (range_boundary's, in range
+    order), found by the ranges owning the faces and vertices (the module's step 2): the same
+    as pinched_vertices(boundary_of_ranges(faces)) over the joined faces."""
+    inbox: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_ranges)]
+    for faces, owners in boundaries:  # each face to the owner of its smallest vertex id
+        _send(inbox, owners[np.arange(faces.shape[0]), np.argmin(faces, axis=1)], faces, owners)
+    fans_inbox: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_ranges)]
+    for received in inbox:
+        if not received:
+            continue
+        faces, owners = (np.concatenate(parts) for parts in zip(*received))
+        kept = _unmatched(faces)  # those two ranges sent are no boundary
+        faces, owners = faces[kept], owners[kept]
+        for k in range(3):  # each boundary face to each distinct owner of its vertices, once
+            new = np.ones(faces.shape[0], dtype=bool) if k == 0 else (owners[:, k] != owners[:, 0])
+            if k == 2:
+                new &= owners[:, 2] != owners[:, 1]
+            _send(fans_inbox, owners[new, k], faces[new], owners[new])
+    pinched = [np.zeros(0, dtype=np.int64)]
+    for o, received in enumerate(fans_inbox):
+        if not received:
+            continue
+        faces, owners = (np.concatenate(parts) for parts in zip(*received))
+        vertex_of, local = _compact_ids(faces)
+        owner_of = np.empty(vertex_of.shape[0], dtype=owners.dtype)
+        owner_of[local.ravel()] = owners.ravel()
+        # Only its own vertices: it has all their faces, not all of the others'.
+        pinched.append(vertex_of[_nonmanifold(local, vertex_of.shape[0]) & (owner_of == o)])
+    return np.sort(np.concatenate(pinched))
+
+
+def _send(inbox: list[list[tuple[np.ndarray, np.ndarray]]], to: np.ndarray, faces: np.ndarray,
+          owners: np.ndarray) -> None:
+    """Append each range's rows of (faces, owners) (F, 3) to its inbox: to (F,) the range."""
+    if to.size and to.min() == to.max():  # one range (the usual case for most faces' owners)
+        inbox[int(to[0])].append((faces, owners))
+        return
+    order = np.argsort(to, kind="stable")
+    bounds = np.searchsorted(to[order], np.arange(len(inbox) + 1))
+    for r in np.flatnonzero(np.diff(bounds)):
+        rows = order[bounds[r]:bounds[r + 1]]
+        inbox[r].append((faces[rows], owners[rows]))
+
+
+def _unmatched(faces: np.ndarray) -> np.ndarray:
+    """Mask (F,) of the faces (mesh ids) whose vertex set no other face has."""
+    vertex_of, local = _compact_ids(faces)
+    return unmatched_faces(local, vertex_of.shape[0])
+
+
+def _compact_ids(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct vertices (K,) of faces (F, 3) (mesh ids, in order of first use) and the
+    faces in their numbers 0..K-1, through a hash table sized by the faces, not by the mesh
+    (topology.local_vertex_ids indexes an array over every id up to the largest: a whole
+    mesh's for each owner; np.unique's sort took 3x longer)."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    bits = max(4, int(2 * faces.size).bit_length())
+    return _hashed_ids(faces, bits)
+
+
+@nb.njit(cache=True)
+def _hashed_ids(faces, bits):
+    """_compact_ids' kernel: open addressing (Fibonacci hash, linear probing) in 2**bits slots,
+    at least twice the corners."""
+    mask = (np.int64(1) << bits) - 1
+    slots = np.full(np.int64(1) << bits, -1, dtype=np.int64)  # the local id held, -1 empty
+    vertex_of = np.empty(faces.size, dtype=np.int64)
+    local = np.empty_like(faces)
+    k = 0
+    for f in range(faces.shape[0]):
+        for j in range(3):
+            v = faces[f, j]
+            s = np.int64((np.uint64(v) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
+            while slots[s] >= 0 and vertex_of[slots[s]] != v:
+                s = (s + 1) & mask
+            if slots[s] < 0:
+                slots[s] = k
+                vertex_of[k] = v
+                k += 1
+            local[f, j] = slots[s]
+    return vertex_of[:k], local
 
 
 def tets_near(part: RangeTets, marked: np.ndarray) -> np.ndarray:
@@ -73,14 +169,16 @@ def tets_near(part: RangeTets, marked: np.ndarray) -> np.ndarray:
     return np.flatnonzero(touching(part.tets, np.isin(part.ids, marked)))
 
 
-def repair_pinches_in_ranges(parts: Sequence[RangeTets], rings: int = PINCH_RINGS) -> list[np.ndarray] | None:
-    """The kept mask (M_r,) of each range's tets (parts, in range order) after the pinch
-    repair, or None if it must run on the whole mesh (a cluster's worklist leaves the stars
-    around the pinches in every order: repair.local_repair's fallback, never seen on a
-    mesher's mesh).  The tets kept are those remove_pinches keeps of the parts' tets joined in
-    range order, points ranked by position (repair.PINCH_ORDERS)."""
+def repair_pinches_in_ranges(parts: Sequence[RangeTets], n_ranges: int,
+                             rings: int = PINCH_RINGS) -> list[np.ndarray] | None:
+    """The kept mask (M_r,) of each range's tets (parts, in range order; owners among
+    0..n_ranges-1) after the pinch repair, or None if it must run on the whole mesh (a
+    cluster's worklist leaves the stars around the pinches in every order:
+    repair.local_repair's fallback, never seen on a mesher's mesh).  The tets kept are those
+    remove_pinches keeps of the parts' tets joined in range order, points ranked by position
+    (repair.PINCH_ORDERS)."""
     kept = [np.ones(p.tets.shape[0], dtype=bool) for p in parts]
-    bad = pinched_vertices(boundary_of_ranges([range_boundary(p) for p in parts]))
+    bad = pinches_by_owners([range_boundary(p) for p in parts], n_ranges)
     if bad.size == 0:
         return kept
     rows = [tets_near(p, bad) for p in parts]
@@ -103,5 +201,5 @@ def repair_pinches_in_ranges(parts: Sequence[RangeTets], rings: int = PINCH_RING
     return kept
 
 
-__all__ = ["RangeTets", "boundary_of_ranges", "pinched_vertices", "range_boundary", "repair_pinches_in_ranges",
-           "tets_near"]
+__all__ = ["RangeTets", "boundary_of_ranges", "pinched_vertices", "pinches_by_owners", "range_boundary",
+           "repair_pinches_in_ranges", "tets_near"]
