@@ -240,6 +240,23 @@ def test_a_surface_built_by_hand_is_checked_before_meshing():
     assert load_surface(ours) is ours
 
 
+@pytest.mark.parametrize("vertices, faces, match", [
+    (CUBE_V.ravel(), CUBE_F, r"vertices shape \(24,\) float64"),
+    ("abc", CUBE_F, r"vertices shape \(\) <U3"),
+    (CUBE_V, 5, r"faces shape \(\) int64"),
+    (CUBE_V, CUBE_F.astype(float), r"faces shape \(12, 3\) float64"),
+    (CUBE_V[:, :2], CUBE_F, r"vertices shape \(8, 2\)"),
+    ([[0, 0], [1]], CUBE_F, r"vertices of type list"),
+])
+def test_a_surface_built_by_hand_with_wrong_arrays_is_refused_in_one_line(vertices, faces, match):
+    """Not (V, 3) numbers and (F, 3) integers: a ParoctError that states what came (a numba
+    typing error, a ValueError or an IndexError from the box before); lists of numbers are
+    arrays."""
+    with pytest.raises(ParoctError, match=r"Surface: " + ".*" + match):
+        paroct.Surface(vertices, faces, 1.0, 6.0, 0, 1)
+    assert paroct.Surface(CUBE_V.tolist(), CUBE_F.tolist(), 1.0, 6.0, 0, 1).bbox_max.tolist() == [1.0, 1.0, 1.0]
+
+
 def test_meshing_and_checking_do_not_depend_on_the_scale():
     """The same cube from 1e-99 to 1e99 across: the same mesh, angles and check (the quality
     measures' fourth powers of lengths over- and underflowed at 1e77)."""

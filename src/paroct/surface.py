@@ -53,6 +53,7 @@ class Surface:
     validated: bool = field(default=False, init=False, repr=False, compare=False)
 
     def __post_init__(self):
+        _check_shapes(self.vertices, self.faces)
         # Stages ask for the box a dozen times per mesh; a reduction over the vertices each time
         # cost small parts several per cent.
         lo, hi, _ = bounding_box(np.ascontiguousarray(self.vertices, dtype=np.float64))
@@ -70,6 +71,29 @@ class Surface:
     def to_manifold(self) -> manifold3d.Manifold:
         """The solid as a manifold3d.Manifold (built anew on each call)."""
         return _to_manifold(self.vertices, self.faces)
+
+
+def _check_shapes(vertices, faces) -> None:
+    """ParoctError, stating the shapes and types, unless vertices are (V, 3) real numbers and
+    faces (F, 3) integers, as arrays or what numpy reads as such (a Surface made by hand;
+    load_surface checks what it reads)."""
+    arrays: list[np.ndarray | None] = []
+    for value in (vertices, faces):
+        try:
+            arrays.append(np.asarray(value))
+        except (ValueError, TypeError):  # ragged lists
+            arrays.append(None)
+    v, f = arrays
+    if v is None or f is None or v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 \
+            or not (np.issubdtype(v.dtype, np.integer) or np.issubdtype(v.dtype, np.floating)) \
+            or not (np.issubdtype(f.dtype, np.integer) or f.size == 0):
+        raise ParoctError(f"Surface: vertices {_described(v, vertices)}, faces {_described(f, faces)}; expected "
+                          "(V, 3) real numbers and (F, 3) integers (load_surface builds a Surface from arrays)")
+
+
+def _described(array: np.ndarray | None, value) -> str:
+    """What an error message says of a value: its shape and dtype as an array, else its type."""
+    return f"shape {array.shape} {array.dtype}" if array is not None else f"of type {type(value).__name__}"
 
 
 def _checked_groups(face_groups, group_names, n_faces: int, label: str) -> tuple[np.ndarray | None, tuple[str, ...]]:
