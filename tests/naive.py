@@ -785,3 +785,13 @@ def pinch_clusters(tets, bad, rings: int) -> list[list[int]]:
         groups = [g for g in groups if not g & r] + [merged]
     clusters = [sorted(int(v) for v in bad if v in g) for g in groups]
     return sorted((c for c in clusters if c), key=lambda c: c[0])
+
+
+def unshared_faces(faces: np.ndarray) -> np.ndarray:
+    """The faces (F, 3) whose vertex set no other face has, by a dict of sorted triples (see
+    range_pinches: the mesh boundary from the ranges' boundaries joined)."""
+    count: dict = {}
+    for f in np.asarray(faces).tolist():
+        key = tuple(sorted(f))
+        count[key] = count.get(key, 0) + 1
+    return np.array([f for f in np.asarray(faces).tolist() if count[tuple(sorted(f))] == 1]).reshape(-1, 3)

@@ -5,10 +5,9 @@ its tets, and only what lies on the boundary or near a pinch leaves it.
    tet of it has (range_boundary): its part of the boundary, and the faces it shares with
    other ranges.
 2. Each such face goes to the range owning its smallest vertex id, which drops those that
-   two ranges sent (boundary_of_ranges over what it received): the rest are the boundary.
-   Each boundary face then goes to the owners of its vertices, and each owner finds which of
-   its vertices are not manifold (pinched_vertices): the pinches, as repair.remove_pinches
-   finds them on the whole mesh (pinches_by_owners).
+   two ranges sent: the rest are the boundary.  Each boundary face then goes to the owners
+   of its vertices, and each owner finds which of its vertices are not manifold: the
+   pinches, as repair.remove_pinches finds them on the whole mesh (pinches_by_owners).
 3. Each range gives the tets around the pinches (tets_near, out to repair.PINCH_RINGS rings),
    which are repaired cluster by cluster (repair.repair_near_pinches), and drops those
    removed.
@@ -61,29 +60,11 @@ def range_boundary(part: RangeTets) -> tuple[np.ndarray, np.ndarray]:
     return part.ids[faces], part.owners[faces]
 
 
-def boundary_of_ranges(faces: Sequence[np.ndarray]) -> np.ndarray:
-    """The mesh boundary (F, 3) joined in one place: the faces of the ranges' boundaries
-    (range_boundary's faces, in range order) whose vertex set no other range's has."""
-    joined = np.concatenate([np.zeros((0, 3), dtype=np.int64)] + [np.asarray(f, dtype=np.int64) for f in faces])
-    return np.compress(_unmatched(joined), joined, axis=0)
-
-
-def pinched_vertices(boundary: np.ndarray) -> np.ndarray:
-    """The boundary's (F, 3) non-manifold vertices (ascending mesh ids): those whose faces do
-    not form one fan (topology.nonmanifold_vertices)."""
-    vertex_of, local = _compact_ids(boundary)
-    return np.sort(vertex_of[_nonmanifold(local, vertex_of.shape[0])])
-
-
-def _nonmanifold(local: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Mask (n_vertices,) of the non-manifold vertices of faces (F, 3) in ids 0..n_vertices-1."""
-    return nonmanifold_of_fans(vertex_fans(local, n_vertices))
-
-
 def pinches_by_owners(boundaries: Sequence[tuple[np.ndarray, np.ndarray]], n_ranges: int) -> np.ndarray:
     """The pinches (ascending mesh ids) from the ranges' boundaries (range_boundary's, in range
-    order), found by the ranges owning the faces and vertices (the module's step 2): the same
-    as pinched_vertices(boundary_of_ranges(faces)) over the joined faces."""
+    order), found by the ranges owning the faces and vertices (the module's step 2): the
+    non-manifold vertices of the mesh boundary (topology.nonmanifold_vertices), which no
+    range holds whole."""
     inbox: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_ranges)]
     for faces, owners in boundaries:  # each face to the owner of its smallest vertex id
         _send(inbox, owners[np.arange(faces.shape[0]), np.argmin(faces, axis=1)], faces, owners)
@@ -108,7 +89,8 @@ def pinches_by_owners(boundaries: Sequence[tuple[np.ndarray, np.ndarray]], n_ran
         owner_of = np.empty(vertex_of.shape[0], dtype=owners.dtype)
         owner_of[local.ravel()] = owners.ravel()
         # Only its own vertices: it has all their faces, not all of the others'.
-        pinched.append(vertex_of[_nonmanifold(local, vertex_of.shape[0]) & (owner_of == o)])
+        bad = nonmanifold_of_fans(vertex_fans(local, vertex_of.shape[0]))
+        pinched.append(vertex_of[bad & (owner_of == o)])
     return np.sort(np.concatenate(pinched))
 
 
@@ -201,5 +183,4 @@ def repair_pinches_in_ranges(parts: Sequence[RangeTets], n_ranges: int,
     return kept
 
 
-__all__ = ["RangeTets", "boundary_of_ranges", "pinched_vertices", "pinches_by_owners", "range_boundary",
-           "repair_pinches_in_ranges", "tets_near"]
+__all__ = ["RangeTets", "pinches_by_owners", "range_boundary", "repair_pinches_in_ranges", "tets_near"]
