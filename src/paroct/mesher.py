@@ -332,7 +332,7 @@ def mesh(
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function, curvature, layers, patch_sizes)
     floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
-    if floor > h:
+    if floor > h * (1 + 1e-9):  # min_size = size, computed apart from it, may round above it
         raise ParoctError(f"min_size = {floor:.6g} must be at most size = {h:.6g}: it is the finest boundary size "
                           "refinement near thin places may reach")
     floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
