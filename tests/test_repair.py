@@ -278,3 +278,24 @@ def test_pinches_repaired_in_ranges_are_the_whole_meshs(seed):
     out, removed, _, _ = remove_pinches(tets.copy(), core.copy(), points)
     got = np.concatenate([p.ids[p.tets[k]] for p, k in zip(parts, kept)])
     assert removed > 0 and np.array_equal(got, out)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_local_vertex_ids_number_by_first_use_dense_or_hashed(seed):
+    """topology.local_vertex_ids against a dict numbering each id at its first use: for ids
+    packed closely (an array over them) and spread far wider than the rows (hashed), int32
+    and int64, with repeats."""
+    from paroct.topology import local_vertex_ids
+
+    rng = np.random.default_rng(seed)
+    for spread in (50, 10**12):
+        for dtype in (np.int32, np.int64):
+            ids = rng.integers(0, min(spread, np.iinfo(dtype).max), size=(int(rng.integers(0, 300)), 3)).astype(dtype)
+            ids[1::4] = ids[::4][: len(ids[1::4])]  # repeated rows and ids
+            first: dict = {}
+            for v in ids.ravel().tolist():
+                first.setdefault(v, len(first))
+            local, vertex_of = local_vertex_ids(ids)
+            assert local.dtype == ids.dtype and local.shape == ids.shape
+            assert vertex_of.tolist() == list(first)
+            assert local.ravel().tolist() == [first[v] for v in ids.ravel().tolist()]

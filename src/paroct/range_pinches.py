@@ -22,11 +22,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-import numba as nb
 import numpy as np
 
 from .repair import PINCH_RINGS, repair_near_pinches, stuffed_boundary, unmatched_faces
-from .topology import nonmanifold_of_fans, touching, vertex_fans
+from .topology import local_vertex_ids, nonmanifold_of_fans, touching, vertex_fans
 
 
 @dataclass(frozen=True)
@@ -85,7 +84,7 @@ def pinches_by_owners(boundaries: Sequence[tuple[np.ndarray, np.ndarray]], n_ran
         if not received:
             continue
         faces, owners = (np.concatenate(parts) for parts in zip(*received))
-        vertex_of, local = _compact_ids(faces)
+        local, vertex_of = local_vertex_ids(faces)
         owner_of = np.empty(vertex_of.shape[0], dtype=owners.dtype)
         owner_of[local.ravel()] = owners.ravel()
         # Only its own vertices: it has all their faces, not all of the others'.
@@ -109,41 +108,8 @@ def _send(inbox: list[list[tuple[np.ndarray, np.ndarray]]], to: np.ndarray, face
 
 def _unmatched(faces: np.ndarray) -> np.ndarray:
     """Mask (F,) of the faces (mesh ids) whose vertex set no other face has."""
-    vertex_of, local = _compact_ids(faces)
+    local, vertex_of = local_vertex_ids(faces)
     return unmatched_faces(local, vertex_of.shape[0])
-
-
-def _compact_ids(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The distinct vertices (K,) of faces (F, 3) (mesh ids, in order of first use) and the
-    faces in their numbers 0..K-1, through a hash table sized by the faces, not by the mesh
-    (topology.local_vertex_ids indexes an array over every id up to the largest: a whole
-    mesh's for each owner; np.unique's sort took 3x longer)."""
-    faces = np.ascontiguousarray(faces, dtype=np.int64)
-    bits = max(4, int(2 * faces.size).bit_length())
-    return _hashed_ids(faces, bits)
-
-
-@nb.njit(cache=True)
-def _hashed_ids(faces, bits):
-    """_compact_ids' kernel: open addressing (Fibonacci hash, linear probing) in 2**bits slots,
-    at least twice the corners."""
-    mask = (np.int64(1) << bits) - 1
-    slots = np.full(np.int64(1) << bits, -1, dtype=np.int64)  # the local id held, -1 empty
-    vertex_of = np.empty(faces.size, dtype=np.int64)
-    local = np.empty_like(faces)
-    k = 0
-    for f in range(faces.shape[0]):
-        for j in range(3):
-            v = faces[f, j]
-            s = np.int64((np.uint64(v) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
-            while slots[s] >= 0 and vertex_of[slots[s]] != v:
-                s = (s + 1) & mask
-            if slots[s] < 0:
-                slots[s] = k
-                vertex_of[k] = v
-                k += 1
-            local[f, j] = slots[s]
-    return vertex_of[:k], local
 
 
 def tets_near(part: RangeTets, marked: np.ndarray) -> np.ndarray:

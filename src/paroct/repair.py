@@ -458,8 +458,7 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
                                points[vertex_of])
     if kept is None:  # a cluster's worklist left its stars in every order
         whole = np.ones(n_vertices, dtype=bool)
-        kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order, whole, n_vertices)
-                                                       for order in PINCH_ORDERS], points, tets)
+        kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order) for order in PINCH_ORDERS], points, tets)
         assert kept is not None  # on the whole mesh every star is complete
         return kept
     alive = np.ones(tets.shape[0], dtype=bool)
@@ -492,9 +491,7 @@ def repair_near_pinches(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray,
     (points (K, 3)), and of the orders whose worklist stays within the vertices whose star is
     complete there (complete (K,) bool: pinch_neighbourhood's region) the one that removes
     the least volume is kept (ties: the first)."""
-    n_vertices = points.shape[0]
-    every = np.ones(n_vertices, dtype=bool)
-    ranks = [_ranks(points, order, every, n_vertices) for order in PINCH_ORDERS]
+    ranks = [_ranks(points, order) for order in PINCH_ORDERS]
     kept_all = np.ones(tets.shape[0], dtype=bool)
     for rows, vertices, cluster_tets, members in _clusters(tets, bad):
         kept = _least_volume_repair(cluster_tets, members, complete[vertices], [rank[vertices] for rank in ranks],
@@ -582,16 +579,14 @@ def _volume(points: np.ndarray, tets: np.ndarray) -> float:
     return float(np.abs(np.einsum("ij,ij->i", a, np.cross(b, c))).sum() / 6.0)
 
 
-def _ranks(points: np.ndarray, order: tuple, among: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Rank (V,) int64 of each vertex marked in among (V,) bool in one of PINCH_ORDERS of its
-    coordinates, points (V, 3): order = (axes, sign), lexicographic over sign * the
-    coordinates in axes order (equal points by id); others -1.  Ranks among a subset keep the
-    order of the whole."""
-    rank = np.full(n_vertices, -1, dtype=np.int64)
-    ids = np.flatnonzero(among)
+def _ranks(points: np.ndarray, order: tuple) -> np.ndarray:
+    """Rank (V,) int64 of each point (points (V, 3)) in one of PINCH_ORDERS of the
+    coordinates: order = (axes, sign), lexicographic over sign * the coordinates in axes
+    order, equal points by id."""
     axes, sign = order
-    keys = sign * points[ids][:, list(axes)]
-    rank[ids[np.lexsort(keys.T[::-1])]] = np.arange(ids.shape[0])
+    keys = sign * points[:, list(axes)]
+    rank = np.empty(points.shape[0], dtype=np.int64)
+    rank[np.lexsort(keys.T[::-1])] = np.arange(points.shape[0])
     return rank
 
 

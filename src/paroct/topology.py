@@ -409,25 +409,47 @@ def keep_rows(rows, keep):
     return count
 
 
-@nb.njit(cache=True)
-def local_vertex_ids(ids):
+def local_vertex_ids(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rows of ids (N, K) with their vertices numbered 0..B-1 in order of first use, and
     vertex_of (B,) int64, the original id of each: (local (N, K) of ids' type, vertex_of).
     Kernels sized by the vertex count then size by B: a stuffed mesh's boundary uses a
     sixth of its points (round_rod at diag/80: 418 k of 2.4 M), and its counting sorts and
-    union-find over 2.4 M slots took twice as long."""
-    new_id = np.full(ids.max() + 1 if ids.size else 0, -1, dtype=np.int64)
-    local = np.empty_like(ids)
+    union-find over 2.4 M slots took twice as long.  Ids spread far wider than the rows (a
+    range's boundary faces in a whole mesh's ids, range_pinches) are numbered through a hash
+    table sized by the rows instead of an array over every id up to the largest."""
+    largest = int(ids.max()) if ids.size else -1
+    if largest + 1 > SPARSE_IDS * ids.size:
+        bits = max(4, int(2 * ids.size).bit_length())  # at least twice the entries
+        return _number_by_first_use(ids, np.full(1 << bits, -1, dtype=np.int64), bits)
+    return _number_by_first_use(ids, np.full(largest + 1, -1, dtype=np.int64), 0)
+
+
+#: local_vertex_ids hashes ids whose largest exceeds this many times the number of entries.
+SPARSE_IDS = 8
+
+
+@nb.njit(cache=True)
+def _number_by_first_use(ids, table, bits):
+    """local_vertex_ids' kernel.  table: the local id of each id, -1 where none yet: indexed by
+    the id (bits 0: an array over 0..largest), or 2**bits slots of open addressing (Fibonacci
+    hash, linear probing)."""
+    mask = (np.int64(1) << bits) - 1
     vertex_of = np.empty(ids.size, dtype=np.int64)
+    local = np.empty_like(ids)
     b = 0
     for r in range(ids.shape[0]):
         for k in range(ids.shape[1]):
-            v = ids[r, k]
-            if new_id[v] < 0:
-                new_id[v] = b
+            v = np.int64(ids[r, k])
+            s = v
+            if bits:
+                s = np.int64((np.uint64(v) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
+                while table[s] >= 0 and vertex_of[table[s]] != v:
+                    s = (s + 1) & mask
+            if table[s] < 0:
+                table[s] = b
                 vertex_of[b] = v
                 b += 1
-            local[r, k] = new_id[v]
+            local[r, k] = table[s]
     return local, vertex_of[:b]
 
 
