@@ -34,7 +34,7 @@ from .errors import ParoctError
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
-                     _cells_around, _check_memory, _check_winding, _finish, _leaf_levels, _losses, _mend, _pass_report,
+                     _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _losses, _mend, _pass_report,
                      _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
                      outside_bound, pass_frame, report_snapshot, resolve_size, restore_report, vertex_classes,
                      warn_bad_tets)
@@ -926,9 +926,8 @@ def number_ranges(pieces: Sequence[RangeMesh], frame: FatFrame, key_bounds: np.n
 def range_tets(piece: RangeMesh, numbering: RangeNumbering, r: int) -> RangeTets:
     """Range r's tets (piece) in the mesh's point ids (numbering), for the pinch repair in
     ranges (range_pinches)."""
-    n, n_cut = piece.vertex_keys.shape[0], piece.cut_keys.shape[0]
-    core = np.zeros(n + n_cut, dtype=bool)
-    core[:n] = piece.inside & (piece.target_keys < 0)  # mesher._core's, over the piece's points
+    n_cut = piece.cut_keys.shape[0]
+    core = _core(piece.inside, piece.target_keys, piece.points.shape[0])  # target_keys -1: no warp, as targets
     ids = np.concatenate([numbering.vertex_ids[r], numbering.n_vertices + numbering.edge_ids[r][:n_cut]])
     owners = np.concatenate([numbering.vertex_owners[r], numbering.edge_owners[r][:n_cut]])
     return RangeTets(ids, piece.tets, core, piece.points, owners)
