@@ -47,6 +47,37 @@ def _canonical(result):
     return canonical_form(result.mesh.points, result.mesh.tets)
 
 
+def _oriented_faces(points: np.ndarray, faces: np.ndarray) -> list:
+    """Faces as sorted rows of their corners' coordinates, each turned to start at its
+    smallest corner (an outward face keeps its orientation)."""
+    rows = []
+    for face in np.asarray(faces).tolist():
+        corners = [tuple(points[v].tolist()) for v in face]
+        k = corners.index(min(corners))
+        rows.append(tuple(corners[k:] + corners[:k]))
+    return sorted(rows)
+
+
+def _assert_same_finish(ranged, whole, label) -> None:
+    """The finish in ranges (range_finish) is mesher._finish's: the same mesh up to numbering,
+    boundary faces, point triangles, quality, topology and missed parts; the volume to
+    rounding."""
+    for got, want in zip(_canonical(ranged), _canonical(whole)):
+        assert np.array_equal(got, want), label
+    a, b = ranged.report, whole.report
+    for name in ("n_tets", "n_vertices", "min_dihedral", "max_dihedral", "min_radius_ratio", "fat_fraction",
+                 "interior_min_dihedral", "interior_max_dihedral", "boundary_genus", "boundary_components",
+                 "boundary_manifold", "repaired_tets"):
+        assert getattr(a, name) == getattr(b, name) or (np.isnan(getattr(a, name)) and np.isnan(getattr(b, name))), \
+            (label, name, getattr(a, name), getattr(b, name))
+    assert np.array_equal(a.missed_vertices, b.missed_vertices) and np.array_equal(a.missed_faces, b.missed_faces)
+    assert a.mesh_volume == pytest.approx(b.mesh_volume, rel=1e-12), label
+    assert _oriented_faces(ranged.mesh.points, ranged.boundary_faces) == \
+        _oriented_faces(whole.mesh.points, whole.boundary_faces), label
+    got = sorted(zip(map(tuple, ranged.mesh.points.tolist()), ranged.point_faces.tolist()))
+    assert got == sorted(zip(map(tuple, whole.mesh.points.tolist()), whole.point_faces.tolist())), label
+
+
 @pytest.mark.parametrize("name, divisions, uniform", [("bunny", 20, False), ("bunny", 40, True),
                                                       ("angle_block", 25, False)])
 def test_ranges_merge_into_the_one_process_mesh(name, divisions, uniform):
@@ -60,9 +91,7 @@ def test_ranges_merge_into_the_one_process_mesh(name, divisions, uniform):
         ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=max_size)
         points, tets = _canonical(ranged)
         assert np.array_equal(points, want_points) and np.array_equal(tets, want_tets), n_parts
-        assert ranged.report.min_dihedral == whole.report.min_dihedral
-        assert ranged.report.repaired_tets == whole.report.repaired_tets
-        assert ranged.report.boundary_genus == whole.report.boundary_genus
+        _assert_same_finish(ranged, whole, n_parts)
 
 
 def test_ranges_cut_through_transition_leaves_and_share_points():
@@ -540,22 +569,24 @@ def _gyroid_sheet() -> manifold3d.Manifold:
 
 def test_ranges_repair_pinches_as_the_one_pass_does(monkeypatch):
     """The gyroid sheet at diag/50, uniform, repairs 426 tets at pinches: repaired in the
-    ranges (range_pinches), the same tets go, and the merged mesh's check finds no pinch left
-    (when the repair's order came from the vertex ids, both passes repaired 441 tets, not the
-    same ones, and the meshes differed)."""
+    ranges (range_pinches), the same tets go, and the ranges finish the mesh (range_finish):
+    no pinch repair nor check runs on the merged mesh (when the repair's order came from the
+    vertex ids, both passes repaired 441 tets, not the same ones, and the meshes differed)."""
     surface = paroct.load_surface(_gyroid_sheet())
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 50
     whole = paroct.mesh(surface, size, max_size=size, thin_features=False)
     assert whole.report.repaired_tets > 100 and "warps" not in whole.report.stage_seconds
     want = _canonical(whole)
     for n_parts in (2, 7):
-        checked = []  # what the merged mesh's check removes: nothing, the ranges repaired it
+        checked = []  # the merged mesh is never repaired nor finished in one place: the ranges did it
         monkeypatch.setattr(mesher, "remove_pinches", lambda *a: checked.append(remove_pinches(*a)) or checked[-1])
         ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size)
-        assert [removed for _, removed, _, _ in checked] == [0]
+        assert checked == []
         assert ranged.report.repaired_tets == whole.report.repaired_tets
         for got, expected in zip(_canonical(ranged), want):
             assert np.array_equal(got, expected), n_parts
+        monkeypatch.undo()
+        _assert_same_finish(ranged, whole, n_parts)
 
 
 @pytest.mark.parametrize("seed", range(4))

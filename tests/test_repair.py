@@ -249,7 +249,8 @@ def test_pinches_repaired_in_ranges_are_the_whole_meshs(seed):
     numbered its own way and each point owned by a random range: the boundary and pinches the
     owners find (range_pinches.pinches_by_owners) are the whole mesh's, and the repair in
     ranges keeps exactly the tets that remove_pinches keeps of the whole mesh."""
-    from paroct.range_pinches import RangeTets, pinches_by_owners, range_boundary, repair_pinches_in_ranges
+    from paroct.range_pinches import (RangeTets, boundary_by_owners, fans_by_owners, pinches_by_owners,
+                                      range_boundary, repair_pinches_in_ranges)
 
     rng = np.random.default_rng(seed)
     tets_a, core_a = _pinched_block(seed, n=8, within=5)
@@ -267,12 +268,13 @@ def test_pinches_repaired_in_ranges_are_the_whole_meshs(seed):
         ids = rng.permutation(np.unique(tets[rows]))
         local = np.argsort(ids)[np.searchsorted(ids[np.argsort(ids)], tets[rows])].astype(np.int32)
         parts.append(RangeTets(ids.astype(np.int64), local, core[ids], points[ids], owner_of[ids]))
-    boundaries = [range_boundary(p) for p in parts]
+    boundaries = [range_boundary(p, r) for r, p in enumerate(parts)]
     whole = stuffed_boundary(tets, core)
-    joined = np.concatenate([faces for faces, _ in boundaries])
+    joined = np.concatenate([b.faces for b in boundaries])
     assert _face_set(naive.unshared_faces(joined)) == _face_set(whole)  # the ranges' boundaries hold the mesh's
     bad = np.flatnonzero(naive.nonmanifold_vertices(whole, len(core)))
-    assert bad.size and np.array_equal(pinches_by_owners(boundaries, len(parts)), bad)
+    owned = boundary_by_owners(boundaries, len(parts))
+    assert bad.size and np.array_equal(pinches_by_owners(fans_by_owners(owned, len(parts))), bad)
     kept = repair_pinches_in_ranges(parts, len(parts))
     assert kept is not None
     out, removed, _, _ = remove_pinches(tets.copy(), core.copy(), points)

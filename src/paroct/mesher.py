@@ -30,7 +30,7 @@ from .lattice import LeafVertices, graded_tets, number_vertices, vertex_spacing
 from .octant import MAX_LEVEL, ancestor_keys, morton_key, morton_keys, octants_in_cells, sorted_lookup, sorted_unique
 from .octree import (FaceBuckets, balance, face_buckets, faces_meeting_cells, octant_lattice_anchors, surface_cells,
                      unique_level_keys)
-from .quality import OUTSIDE, outlier_flags, summarize
+from .quality import OUTSIDE, TetSummary, outlier_flags, summarize
 from .repair import remove_pinches
 from .sharp import snap_to_features
 from .sizing import Region, SizeField, SizeFunction, positive_number, size_field, size_seeds
@@ -1038,12 +1038,17 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     faces_out = np.take(new_id, faces_out)  # every boundary vertex is a tet's: none is -1
     report.n_vertices = int(mesh.points.shape[0])
     stages.done("quality")
+    warn_unresolved_cuts(report)
+    return MeshResult(mesh, report, surface, faces_out, point_faces)
+
+
+def warn_unresolved_cuts(report: MeshReport) -> None:
+    """The report's warning of cut points placed at edge midpoints, if any were."""
     if report.unresolved_cuts:
         report.warnings.append(
             f"{report.unresolved_cuts} cut points were placed at edge midpoints: no row crossing matched "
             "(lattice vertices lie exactly on the surface there); the boundary is up to size/2 off at those edges"
         )
-    return MeshResult(mesh, report, surface, faces_out, point_faces)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -1726,13 +1731,17 @@ def _measure(points, tets, core, topo: SurfaceTopology, report: MeshReport) -> N
     """Quality, volume and boundary topology (topo: the boundary's).  Tets with all four vertices
     core (unwarped inside lattice vertices) are lattice tets the boundary does not touch: their
     extreme dihedral angles are reported apart (they must stay in [30, 135] degrees)."""
-    summary = summarize(points, tets, core, FAT_RADIUS_RATIO)
-    report.n_tets = int(tets.shape[0])
-    if tets.shape[0]:
+    report_measures(summarize(points, tets, core, FAT_RADIUS_RATIO), int(tets.shape[0]), topo, report)
+
+
+def report_measures(summary: TetSummary, n_tets: int, topo: SurfaceTopology, report: MeshReport) -> None:
+    """_measure's report of n_tets tets' summary and their boundary's topology."""
+    report.n_tets = n_tets
+    if n_tets:
         report.min_dihedral = summary.min_dihedral
         report.max_dihedral = summary.max_dihedral
         report.min_radius_ratio = summary.min_radius_ratio
-        report.fat_fraction = summary.n_fat / tets.shape[0]
+        report.fat_fraction = summary.n_fat / n_tets
         report.interior_min_dihedral = summary.interior_min_dihedral
         report.interior_max_dihedral = summary.interior_max_dihedral
     report.mesh_volume = summary.volume

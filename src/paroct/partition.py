@@ -9,9 +9,11 @@ octree (``octree_in_range``) the band and seeds of one ring of max_size octants 
 (the insulation layer of 2:1 balance); its tets (``mesh_range``) its leaves, the leaves
 touching them (``touching_leaves``) and the band pieces holding those.  Pieces name points
 by lattice coordinates and cut points by their edge (``pack_coords``, ``edge_keys``), so they
-join with no shared numbering.  The finish (pinch repair, quality, compaction) runs on the
-merged mesh; so does mending by other warps where a tet leaves the bound: the ranges' lattice
-tets (``range_lattice``) are joined (``merge_range_lattices``), stuffed and mended as one.
+join with no shared numbering.  The pinch repair (``range_pinches``) and the finish (quality,
+topology, missed parts, compaction: ``range_finish``) run in the ranges, only boundary faces,
+counts and used points leaving them; mending by other warps, where a tet leaves the bound,
+runs on the merged mesh: the ranges' lattice tets (``range_lattice``) are joined
+(``merge_range_lattices``), stuffed and mended as one.
 The merged mesh is the one-process pass's, tet for tet and bit for bit
 (tests/test_partition.py), because every tie stuffing and mending break is broken by
 lattice coordinates, not by vertex ids (sessions 41, 43, 46), and each range's band and
@@ -36,14 +38,15 @@ from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
                      _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _losses, _mend, _pass_report,
                      _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
-                     outside_bound, pass_frame, report_snapshot, resolve_size, restore_report, vertex_classes,
-                     warn_bad_tets)
+                     TetMesh, outside_bound, pass_frame, report_measures, report_snapshot, resolve_size, restore_report,
+                     vertex_classes, warn_bad_tets, warn_unresolved_cuts)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
 from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field
 from .quality import OUTSIDE as OUTSIDE_BOUND
-from .range_pinches import RangeTets, repair_pinches_in_ranges
+from .range_finish import finish_in_ranges
+from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners, owned_boundary, repair_pinches_in_ranges
 from .stuffing import CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource, load_surface
 
@@ -985,9 +988,11 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     near it (band_in_range), the octree from the band within one max_size octant of it
     (octree_in_range), and the tets of its leaves from them, the leaves touching them and the
     band pieces it reads (mesh_range); their pinches repaired in the ranges (range_pinches:
-    only the boundary faces and the tets near pinches leave them), then merged (merge_ranges)
-    and finished as one mesh (quality, topology, compaction).  No band or octree of the whole
-    surface is built.
+    only the boundary faces and the tets near pinches leave them) and the mesh finished in
+    the ranges (range_finish: quality, topology, missed parts and compaction, as
+    mesher._finish on the merged mesh), the result being the owners' points and the ranges'
+    tets one after another.  No band or octree of the whole surface is built, and no mesh is
+    merged but the result (merge_ranges only where the pinch repair must run on the whole).
 
     mapper(function, *iterables): runs each of the three stages over the ranges and returns
     their results in order, as the built-in map does (the default: one range after another);
@@ -1047,18 +1052,16 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     numbering = number_ranges(pieces, frame, key_bounds)
     # The pinches are repaired in the ranges (range_pinches): the merged mesh is only checked.
     parts = [range_tets(p, numbering, r) for r, p in enumerate(pieces)]
-    kept = repair_pinches_in_ranges(parts, len(parts))
-    removed, bared = 0, None  # bared: the vertices of removed tets
-    if kept is not None:
-        bared = np.zeros(numbering.n_vertices + numbering.n_edges, dtype=bool)
-        for part, alive in zip(parts, kept):
-            bared[part.ids[part.tets[~alive]].ravel()] = True
-            removed += int(alive.shape[0] - np.count_nonzero(alive))
-        pieces = [dataclasses.replace(p, tets=p.tets[alive]) for p, alive in zip(pieces, kept)]
-    del parts
-    points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds, numbering)
+    owned = owned_boundary(parts, len(parts))  # the boundary, held by its owners
+    fans = fans_by_owners(owned, len(parts))
+    kept = repair_pinches_in_ranges(parts, len(parts), fans)
     fresh = report_snapshot(report)
-    result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h, removed=removed, lost=bared)
+    if kept is not None:
+        result = _finish_ranges(parts, kept, owned, fans, pieces, numbering.n_vertices, report, stages, surface, h)
+    else:  # the repair must run on the whole mesh (never seen on a mesher's mesh)
+        points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds, numbering)
+        result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
+    del parts
     if outside_bound(report):
         # As mesh(): stuffed again with every tet measured and other warps tried near the bad
         # ones, here over the ranges' lattice tets joined into one lattice.
@@ -1084,6 +1087,33 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
         report.warnings.append(f"{lost} (thin walls are not refined in ranges)")
     return result
+
+
+def _finish_ranges(parts: Sequence[RangeTets], kept: Sequence[np.ndarray], owned: Sequence[BoundaryFaces],
+                   fans: Sequence[OwnerFans] | None, pieces: Sequence[RangeMesh], n_vertices: int, report: MeshReport,
+                   stages: _Stages, surface: Surface, size: float) -> MeshResult:
+    """mesher._finish of the ranges' tets (parts: the pieces' in mesh ids, owned and fans:
+    their boundary held by its owners and its fans, kept: what the pinch repair in ranges
+    keeps of them), each range finishing its own (range_finish): the mesh and the report of
+    the ranges' tets joined in range order."""
+    removed = [np.flatnonzero(~alive) for alive in kept]
+    report.repaired_tets = sum(r.shape[0] for r in removed)
+    if report.repaired_tets:
+        # The vertices of removed tets (few: near pinches) go to every range: their exposed
+        # faces can now lie on the boundary, found again.
+        bared = np.unique(np.concatenate([p.ids[p.tets[r]].ravel() for p, r in zip(parts, removed)]))
+        parts = [dataclasses.replace(p, tets=p.tets[alive], core=p.core & ~np.isin(p.ids, bared))
+                 for p, alive in zip(parts, kept)]
+        owned, fans = owned_boundary(parts, len(parts)), None
+    stages.done("repair")
+    point_faces = [np.concatenate([piece.target_faces, piece.cut_faces]).astype(np.int32) for piece in pieces]
+    done = finish_in_ranges(parts, owned, point_faces, n_vertices, surface, size, fans)
+    report_measures(done.summary, int(done.tets.shape[0]), done.topology, report)
+    report.missed_vertices, report.missed_faces = done.missed_vertices, done.missed_faces
+    report.n_vertices = int(done.points.shape[0])
+    stages.done("quality")
+    warn_unresolved_cuts(report)
+    return MeshResult(TetMesh(done.points, done.tets), report, surface, done.boundary, done.point_faces)
 
 
 def _mapped(run: Callable[..., Iterable], function: Callable, *iterables, kind: type, count: int | None = None) -> list:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numba as nb
 import numpy as np
@@ -360,3 +361,22 @@ def summarize(points: np.ndarray, tets: np.ndarray, core: np.ndarray, fat_ratio:
         imn = imx = float("nan")
     return TetSummary(float(partial[:, 0].min()), float(partial[:, 1].max()), float(partial[:, 2].min()),
                       float(partial[:, 3].sum()) / scale / scale / scale, imn, imx, int(fat_count.sum()))
+
+
+def merged_summaries(summaries: Sequence[TetSummary]) -> TetSummary:
+    """summarize's summary of disjoint sets of tets joined, from theirs (a range's each): the
+    extremes of their extremes and the sums of their counts and volumes (summed in their
+    order, so the volume may differ from one pass's in the last bits).  NaN extremes (no
+    tets, no core tet) are skipped."""
+
+    def extreme(pick, values):
+        values = [v for v in values if not math.isnan(v)]
+        return pick(values) if values else float("nan")
+
+    return TetSummary(extreme(min, [s.min_dihedral for s in summaries]),
+                      extreme(max, [s.max_dihedral for s in summaries]),
+                      extreme(min, [s.min_radius_ratio for s in summaries]),
+                      sum((s.volume for s in summaries), 0.0),
+                      extreme(min, [s.interior_min_dihedral for s in summaries]),
+                      extreme(max, [s.interior_max_dihedral for s in summaries]),
+                      sum(s.n_fat for s in summaries))

@@ -20,7 +20,7 @@ remove_pinches keeps of the ranges' tets joined in range order (tests/test_repai
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -51,59 +51,120 @@ class RangeTets:
                              f"(M, 4), ({k},), ({k}, 3) and ({k},)")
 
 
-def range_boundary(part: RangeTets) -> tuple[np.ndarray, np.ndarray]:
-    """Faces (F, 3) int64 (mesh ids, oriented outward) of the range's tets that have no core
-    vertex and that no other tet of the range has: its part of the mesh boundary and the faces
-    it shares with other ranges; and the owner (F, 3) of each of their vertices."""
+class BoundaryFaces(NamedTuple):
+    """Faces that one range holds of the mesh boundary, or that may lie on it: faces (F, 3)
+    int64 mesh ids, oriented outward; owners (F, 3) the range owning each vertex; sender (F,)
+    the range whose tets have the face, and local (F, 3) the face in that range's point
+    numbering (what it reads the points' positions and new ids by)."""
+
+    faces: np.ndarray
+    owners: np.ndarray
+    sender: np.ndarray
+    local: np.ndarray
+
+
+def range_boundary(part: RangeTets, r: int) -> BoundaryFaces:
+    """The faces of range r's tets (part) that have no core vertex and that no other tet of
+    the range has: its part of the mesh boundary and the faces it shares with other ranges."""
     faces = stuffed_boundary(part.tets, part.core)
-    return part.ids[faces], part.owners[faces]
+    return BoundaryFaces(part.ids[faces], part.owners[faces], np.full(faces.shape[0], r, dtype=np.int32), faces)
 
 
-def pinches_by_owners(boundaries: Sequence[tuple[np.ndarray, np.ndarray]], n_ranges: int) -> np.ndarray:
-    """The pinches (ascending mesh ids) from the ranges' boundaries (range_boundary's, in range
-    order), found by the ranges owning the faces and vertices (the module's step 2): the
-    non-manifold vertices of the mesh boundary (topology.nonmanifold_vertices), which no
-    range holds whole."""
-    inbox: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_ranges)]
-    for faces, owners in boundaries:  # each face to the owner of its smallest vertex id
-        _send(inbox, owners[np.arange(faces.shape[0]), np.argmin(faces, axis=1)], faces, owners)
-    fans_inbox: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_ranges)]
+def boundary_by_owners(boundaries: Sequence[BoundaryFaces], n_ranges: int) -> list[BoundaryFaces]:
+    """The mesh boundary from the ranges' boundaries (range_boundary's, in range order), each
+    face held once: by the range owning its smallest vertex id, which drops the faces two
+    ranges sent (the module's step 2, first half).  Returns each range's faces, in the order
+    received."""
+    inbox: list[list[BoundaryFaces]] = [[] for _ in range(n_ranges)]
+    for sent in boundaries:
+        _send(inbox, sent.owners[np.arange(sent.faces.shape[0]), np.argmin(sent.faces, axis=1)], sent)
+    owned = []
     for received in inbox:
-        if not received:
-            continue
-        faces, owners = (np.concatenate(parts) for parts in zip(*received))
-        kept = _unmatched(faces)  # those two ranges sent are no boundary
-        faces, owners = faces[kept], owners[kept]
-        for k in range(3):  # each boundary face to each distinct owner of its vertices, once
-            new = np.ones(faces.shape[0], dtype=bool) if k == 0 else (owners[:, k] != owners[:, 0])
+        held = _joined(received)
+        owned.append(_rows(held, _unmatched(held.faces)) if held.faces.shape[0] else held)
+    return owned
+
+
+def faces_around_owned(owned: Sequence[BoundaryFaces], n_ranges: int) -> list[BoundaryFaces]:
+    """Each boundary face (boundary_by_owners', held once) sent to each distinct owner of its
+    vertices, once: every range then holds every boundary face around each vertex it owns."""
+    inbox: list[list[BoundaryFaces]] = [[] for _ in range(n_ranges)]
+    for held in owned:
+        owners = held.owners
+        for k in range(3):
+            new = np.ones(owners.shape[0], dtype=bool) if k == 0 else (owners[:, k] != owners[:, 0])
             if k == 2:
                 new &= owners[:, 2] != owners[:, 1]
-            _send(fans_inbox, owners[new, k], faces[new], owners[new])
+            _send(inbox, owners[new, k], _rows(held, new))
+    return [_joined(received) for received in inbox]
+
+
+class OwnerFans(NamedTuple):
+    """What one owner holds of the boundary around its vertices (faces_around_owned's faces):
+    local (F, 3) the faces in local vertex ids, numbered by first use; vertex_of (B,) the mesh
+    id and owner_of (B,) the owner of each local vertex; fans (B,) topology.vertex_fans of
+    them (right for its own vertices, whose faces it holds all)."""
+
+    local: np.ndarray
+    vertex_of: np.ndarray
+    owner_of: np.ndarray
+    fans: np.ndarray
+
+
+def fans_by_owners(owned: Sequence[BoundaryFaces], n_ranges: int) -> list[OwnerFans]:
+    """Each range's OwnerFans of the boundary held by its owners (boundary_by_owners')."""
+    out = []
+    for held in faces_around_owned(owned, n_ranges):
+        local, vertex_of = local_vertex_ids(held.faces)
+        owner_of = np.empty(vertex_of.shape[0], dtype=held.owners.dtype)
+        owner_of[local.ravel()] = held.owners.ravel()
+        out.append(OwnerFans(local, vertex_of, owner_of, vertex_fans(local, vertex_of.shape[0])))
+    return out
+
+
+def pinches_by_owners(fans: Sequence[OwnerFans]) -> np.ndarray:
+    """The pinches (ascending mesh ids) of the mesh boundary, found by the ranges owning the
+    vertices from their fans (fans_by_owners'; the module's step 2): the non-manifold
+    vertices of the mesh boundary (topology.nonmanifold_vertices), which no range holds
+    whole."""
     pinched = [np.zeros(0, dtype=np.int64)]
-    for o, received in enumerate(fans_inbox):
-        if not received:
-            continue
-        faces, owners = (np.concatenate(parts) for parts in zip(*received))
-        local, vertex_of = local_vertex_ids(faces)
-        owner_of = np.empty(vertex_of.shape[0], dtype=owners.dtype)
-        owner_of[local.ravel()] = owners.ravel()
+    for o, held in enumerate(fans):
         # Only its own vertices: it has all their faces, not all of the others'.
-        bad = nonmanifold_of_fans(vertex_fans(local, vertex_of.shape[0]))
-        pinched.append(vertex_of[bad & (owner_of == o)])
+        pinched.append(held.vertex_of[nonmanifold_of_fans(held.fans) & (held.owner_of == o)])
     return np.sort(np.concatenate(pinched))
 
 
-def _send(inbox: list[list[tuple[np.ndarray, np.ndarray]]], to: np.ndarray, faces: np.ndarray,
-          owners: np.ndarray) -> None:
-    """Append each range's rows of (faces, owners) (F, 3) to its inbox: to (F,) the range."""
+def owned_numbering(held: BoundaryFaces) -> tuple[np.ndarray, np.ndarray]:
+    """The held faces in local vertex ids (F, 3), numbered by first use (local_vertex_ids),
+    and the row (B,) of held.faces.ravel() where each local vertex is first used."""
+    local, vertex_of = local_vertex_ids(held.faces)
+    first = np.empty(vertex_of.shape[0], dtype=np.int64)
+    flat = local.ravel()
+    first[flat[::-1]] = np.arange(flat.shape[0] - 1, -1, -1)  # the last write is the first use
+    return local, first
+
+
+def _rows(faces: BoundaryFaces, rows: np.ndarray) -> BoundaryFaces:
+    return BoundaryFaces(*(column[rows] for column in faces))
+
+
+def _joined(parts: Sequence[BoundaryFaces]) -> BoundaryFaces:
+    """The parts' faces one after another (none: empty arrays)."""
+    if not parts:
+        return BoundaryFaces(np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3), dtype=np.int64),
+                             np.zeros(0, dtype=np.int32), np.zeros((0, 3), dtype=np.int32))
+    return BoundaryFaces(*(np.concatenate(column) for column in zip(*parts)))
+
+
+def _send(inbox: list[list[BoundaryFaces]], to: np.ndarray, faces: BoundaryFaces) -> None:
+    """Append each range's rows of faces to its inbox: to (F,) the range of each row."""
     if to.size and to.min() == to.max():  # one range (the usual case for most faces' owners)
-        inbox[int(to[0])].append((faces, owners))
+        inbox[int(to[0])].append(faces)
         return
     order = np.argsort(to, kind="stable")
     bounds = np.searchsorted(to[order], np.arange(len(inbox) + 1))
     for r in np.flatnonzero(np.diff(bounds)):
-        rows = order[bounds[r]:bounds[r + 1]]
-        inbox[r].append((faces[rows], owners[rows]))
+        inbox[r].append(_rows(faces, order[bounds[r]:bounds[r + 1]]))
 
 
 def _unmatched(faces: np.ndarray) -> np.ndarray:
@@ -117,16 +178,23 @@ def tets_near(part: RangeTets, marked: np.ndarray) -> np.ndarray:
     return np.flatnonzero(touching(part.tets, np.isin(part.ids, marked)))
 
 
-def repair_pinches_in_ranges(parts: Sequence[RangeTets], n_ranges: int,
+def owned_boundary(parts: Sequence[RangeTets], n_ranges: int) -> list[BoundaryFaces]:
+    """The mesh boundary of the parts' tets (in range order), held by its owners: each
+    range's range_boundary through boundary_by_owners."""
+    return boundary_by_owners([range_boundary(p, r) for r, p in enumerate(parts)], n_ranges)
+
+
+def repair_pinches_in_ranges(parts: Sequence[RangeTets], n_ranges: int, fans: Sequence[OwnerFans] | None = None,
                              rings: int = PINCH_RINGS) -> list[np.ndarray] | None:
     """The kept mask (M_r,) of each range's tets (parts, in range order; owners among
     0..n_ranges-1) after the pinch repair, or None if it must run on the whole mesh (a
     cluster's worklist leaves the stars around the pinches in every order:
-    repair.local_repair's fallback, never seen on a mesher's mesh).  The tets kept are those
-    remove_pinches keeps of the parts' tets joined in range order, points ranked by position
-    (repair.PINCH_ORDERS)."""
+    repair.local_repair's fallback, never seen on a mesher's mesh).  fans: the owners' fans
+    of their boundary (fans_by_owners of owned_boundary), if the caller has them.  The tets
+    kept are those remove_pinches keeps of the parts' tets joined in range order, points
+    ranked by position (repair.PINCH_ORDERS)."""
     kept = [np.ones(p.tets.shape[0], dtype=bool) for p in parts]
-    bad = pinches_by_owners([range_boundary(p) for p in parts], n_ranges)
+    bad = pinches_by_owners(fans_by_owners(owned_boundary(parts, n_ranges), n_ranges) if fans is None else fans)
     if bad.size == 0:
         return kept
     rows = [tets_near(p, bad) for p in parts]
@@ -149,4 +217,6 @@ def repair_pinches_in_ranges(parts: Sequence[RangeTets], n_ranges: int,
     return kept
 
 
-__all__ = ["RangeTets", "pinches_by_owners", "range_boundary", "repair_pinches_in_ranges", "tets_near"]
+__all__ = ["BoundaryFaces", "OwnerFans", "RangeTets", "boundary_by_owners", "faces_around_owned", "fans_by_owners",
+           "owned_boundary", "owned_numbering", "pinches_by_owners", "range_boundary", "repair_pinches_in_ranges",
+           "tets_near"]

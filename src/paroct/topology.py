@@ -455,18 +455,27 @@ def _number_by_first_use(ids, table, bits):
 
 @nb.njit(cache=True)
 def _components(faces, n_vertices):
-    parent = np.arange(n_vertices)
-    for f in range(faces.shape[0]):
-        for j in range(1, 3):
-            a = faces[f, 0]
-            b = faces[f, j]
-            union(parent, a, b)
+    parent = component_roots(faces, n_vertices)
     used = used_vertices(faces, n_vertices)
     count = 0
     for v in range(n_vertices):
         if used[v] and parent[v] == v:
             count += 1
     return count
+
+
+@nb.njit(cache=True)
+def component_roots(faces, n_vertices):
+    """The root (n_vertices,) int64 of each vertex's component, the triangles (F, 3) joining
+    their vertices: the smallest vertex of the component (each vertex its own if no face
+    uses it)."""
+    parent = np.arange(n_vertices)
+    for f in range(faces.shape[0]):
+        for j in range(1, 3):
+            union(parent, faces[f, 0], faces[f, j])
+    for v in range(n_vertices):  # ascending: a parent is smaller, so its root is final
+        parent[v] = parent[parent[v]]
+    return parent
 
 
 @dataclass(frozen=True)
