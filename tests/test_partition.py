@@ -10,6 +10,7 @@ import pytest
 
 import paroct
 from paroct import mesher, octant
+from paroct.stuffing import DIHEDRAL_BOUND
 from paroct.check import canonical_form
 from paroct.octree import balance
 from paroct.partition import mesh_in_ranges, mesh_range, pack_coords, touching_leaves
@@ -88,7 +89,7 @@ def test_ranges_merge_into_the_one_process_mesh(name, divisions, uniform):
     assert "warps" not in whole.report.stage_seconds  # no mending: its tets were in the bound at once
     want_points, want_tets = _canonical(whole)
     for n_parts in (1, 2, 5, whole.report.n_leaves + 3):  # more ranges than leaves: some empty
-        ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=max_size)
+        ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=max_size, thin_features=False)
         points, tets = _canonical(ranged)
         assert np.array_equal(points, want_points) and np.array_equal(tets, want_tets), n_parts
         _assert_same_finish(ranged, whole, n_parts)
@@ -159,7 +160,7 @@ def test_a_range_pass_that_needs_mending_mends_as_mesh_does(n_parts):
     surface = paroct.load_surface(DATA / "bunny.stl")
     size = float(np.linalg.norm(surface.bbox_max - surface.bbox_min)) / 30
     whole = paroct.mesh(surface, size, max_size=size, thin_features=False)
-    ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size)
+    ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size, thin_features=False)
     assert "warps" in whole.report.stage_seconds and "warps" in ranged.report.stage_seconds
     assert ranged.report.min_dihedral >= 10.7 and not any("degrees" in w for w in ranged.report.warnings)
     a, b = _canonical(whole), _canonical(ranged)
@@ -281,10 +282,43 @@ def test_a_range_share_holds_what_its_whole_pieces_would_give():
     assert sum(s.band.keys.shape[0] for s in shares) > 0
 
 
-def test_a_part_thinner_than_the_lattice_is_refused_in_ranges():
+def test_a_part_thinner_than_the_lattice_is_kept_by_halving_the_band_in_ranges():
+    """A plate a tenth of the size thick: every pass down to size / 4 drops it; the ranges
+    halve the whole band as mesh() would (mesher.halve_whole_band) and keep it at size / 8,
+    the whole band's floor.  Without thin_features the one pass has no tets: refused."""
     surface = paroct.load_surface(manifold3d.Manifold.cube([1.0, 1.0, 0.01]))
+    ranged = mesh_in_ranges(surface, 0.1, n_parts=2)
+    report = ranged.report
+    assert report.size == 0.1 / 8 and report.n_tets > 0 and not report.warnings
+    assert abs(report.volume_error) < 0.01 and (report.boundary_components, report.boundary_genus) == (1, 0)
+    assert [note.split(":")[0] for note in report.notes] == ["boundary size 0.1 -> 0.05", "boundary size 0.05 -> 0.025",
+                                                             "boundary size 0.025 -> 0.0125"]
+    assert DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]
     with pytest.raises(paroct.ParoctError, match="no tets"):
+        mesh_in_ranges(surface, 0.1, n_parts=2, thin_features=False)
+
+
+def test_ranges_that_reach_the_whole_bands_floor_say_so():
+    """A plate a fiftieth of the size thick loses its volume at every whole band down to size /
+    8: the warning says the whole band went as far as it goes, not that refinement near thin
+    places reached min_size (which mesh() does and the ranges do not)."""
+    surface = paroct.load_surface(manifold3d.Manifold.cube([1.0, 1.0, 0.002]))
+    with pytest.raises(paroct.ParoctError, match="the whole boundary refined to 0.0125, as far as it goes"):
         mesh_in_ranges(surface, 0.1, n_parts=2)
+
+
+def test_ranges_halve_the_band_as_mesh_does_where_it_halves_the_whole_band():
+    """Bunny at diag/30 loses 1.8 % of its volume; mesh() meshes the whole band at size / 2
+    (estimated at fewer tets than refining near its thin places), and so do the ranges: the
+    same mesh, boundary and report."""
+    surface = paroct.load_surface(DATA / "bunny.stl")
+    size = surface.diagonal / 30
+    whole = paroct.mesh(surface, size)
+    assert whole.report.size == size / 2 and "everywhere" in whole.report.notes[-1]
+    for n_parts in (1, 4):
+        ranged = mesh_in_ranges(surface, size, n_parts=n_parts)
+        _assert_same_finish(ranged, whole, n_parts)
+        assert ranged.report.notes[0].startswith(f"boundary size {size:.4g} -> {size / 2:.4g}")
 
 
 def test_ranges_past_the_octants_the_surface_meets_are_dropped():
@@ -299,14 +333,14 @@ def test_ranges_past_the_octants_the_surface_meets_are_dropped():
         calls.append(len(results))
         return results
 
-    ranged = mesh_in_ranges(sphere, 0.1, n_parts=10**6, mapper=counting_map)
+    ranged = mesh_in_ranges(sphere, 0.1, n_parts=10**6, mapper=counting_map, thin_features=False)
     whole = paroct.mesh(sphere, 0.1, thin_features=False)
     assert 1 <= max(calls) < 1000
     for got, want in zip(_canonical(ranged), _canonical(whole)):
         assert np.array_equal(got, want)
     # Past one range a surface vertex the bounds repeat: 10**30 ranges are those, with no
     # array of 10**30 bounds (numpy's "maximum allowed dimension exceeded" before).
-    for got, want in zip(_canonical(mesh_in_ranges(sphere, 0.1, n_parts=10**30)), _canonical(whole)):
+    for got, want in zip(_canonical(mesh_in_ranges(sphere, 0.1, n_parts=10**30, thin_features=False)), _canonical(whole)):
         assert np.array_equal(got, want)
 
 
@@ -542,10 +576,10 @@ def test_ranges_run_side_by_side_in_other_processes():
         calls.append(len(items[0]))
         return map(function, *items)
 
-    alone = mesh_in_ranges(surface, size, n_parts=3, mapper=recording_map)
+    alone = mesh_in_ranges(surface, size, n_parts=3, mapper=recording_map, thin_features=False)  # one pass
     assert calls == [3, 3, 3]
     with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
-        side_by_side = mesh_in_ranges(surface, size, n_parts=3, mapper=pool.map)
+        side_by_side = mesh_in_ranges(surface, size, n_parts=3, mapper=pool.map, thin_features=False)
     for got, want in zip(_canonical(side_by_side), _canonical(alone)):
         assert np.array_equal(got, want)
     with pytest.raises(paroct.ParoctError, match="mapper = 4"):
@@ -580,7 +614,7 @@ def test_ranges_repair_pinches_as_the_one_pass_does(monkeypatch):
     for n_parts in (2, 7):
         checked = []  # the merged mesh is never repaired nor finished in one place: the ranges did it
         monkeypatch.setattr(mesher, "remove_pinches", lambda *a: checked.append(remove_pinches(*a)) or checked[-1])
-        ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size)
+        ranged = mesh_in_ranges(surface, size, n_parts=n_parts, max_size=size, thin_features=False)
         assert checked == []
         assert ranged.report.repaired_tets == whole.report.repaired_tets
         for got, expected in zip(_canonical(ranged), want):

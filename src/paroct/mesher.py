@@ -331,12 +331,7 @@ def mesh(
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
     field = size_field(h, max_size, regions, size_function, curvature, layers, patch_sizes)
-    floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
-    if floor > h * (1 + 1e-9):  # min_size = size, computed apart from it, may round above it
-        raise ParoctError(f"min_size = {floor:.6g} must be at most size = {h:.6g}: it is the finest boundary size "
-                          "refinement near thin places may reach")
-    floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
-    whole_floor = floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
+    floor, whole_floor = size_floors(surface, h, min_size)
     budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
     if progress is not None and not callable(progress):
         raise ParoctError(f"progress = {progress!r}: must be a function taking a stage's name, or None")
@@ -345,8 +340,8 @@ def mesh(
     if progress:
         progress("load")
 
-    notes = []
-    band, stage_seconds = h, {"load": loaded}  # stage times add up over the attempts
+    notes: list[str] = []
+    stage_seconds = {"load": loaded}  # stage times add up over the attempts
     t_asks = time.perf_counter()
     asks, ask_notes = _feature_asks(surface, field, floor)
     notes.extend(ask_notes)
@@ -354,34 +349,97 @@ def mesh(
         stage_seconds["sizing"] = time.perf_counter() - t_asks
         if progress:
             progress("sizing")
-    memory_bound, tried = False, list[float]()  # tried: whole-band sizes below h that a pass lost at
-    best, kept_text = None, ""  # best: the whole-band pass whose boundary is nearest the input's so far
-    while True:
+
+    def whole_pass(band: float) -> PassOutcome:
         report = _pass_report(surface, field, band, stage_seconds)
-        result, lost, advice, walls, report, note = _whole_pass(surface, field, band, asks, budget, report, progress,
-                                                                stage_seconds)
+        return PassOutcome(*_whole_pass(surface, field, band, asks, budget, report, progress, stage_seconds))
+
+    def refine_locally(report: MeshReport, lost: str, walls: ThinFeatures) -> LocalOutcome:
+        # The whole band at h / 2, h / 4, ... as memory allows, for _thin_locally to try
+        # where one is estimated at fewer tets than its next round; h / 2 only where
+        # halving can mend what the pass lost (HALVING_GAIN).  Not at whole_floor: should
+        # everything lose, the pass there is the one returned, as before session 34.
+        wholes, whole = [], h / 2
+        while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
+            wholes.append(whole)
+            whole /= 2
+        if _missed(report) or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
+            wholes = [s for s in wholes if s != h / 2]
+        local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes, progress,
+                                                       stage_seconds, asks)
+        if local is not None:
+            local.report.notes = [*notes, *local.report.notes]
+            return LocalOutcome(local, tried, [], False)
+        if why:
+            tried_notes = [*tried_notes, f"refining the band only near thin places: {why}; refining the whole band instead"]
+        return LocalOutcome(None, tried, tried_notes, why == LOCAL_MEMORY)
+
+    return halve_whole_band(surface, field, floor, whole_floor, budget, thin_features, whole_pass, notes, refine_locally)
+
+
+class PassOutcome(NamedTuple):
+    """One pass of halve_whole_band: the result, what it lost ('' if nothing: _losses), the
+    advice on what would keep it, the walls and gaps measured where it lost (else None), its
+    report, and a note ('' if none)."""
+
+    result: MeshResult
+    lost: str
+    advice: str
+    walls: ThinFeatures | None
+    report: MeshReport
+    note: str
+
+
+class LocalOutcome(NamedTuple):
+    """What refining near thin places gave halve_whole_band: the result if it kept the solid
+    (else None), the whole-band sizes it tried that lost, notes on them, and whether memory
+    stopped it."""
+
+    result: MeshResult | None
+    tried: list[float]
+    notes: list[str]
+    memory_bound: bool
+
+
+def size_floors(surface: Surface, h: float, min_size: float | None) -> tuple[float, float]:
+    """(floor, whole_floor): the finest boundary size refinement near thin places may reach
+    (min_size, by default h / DEFAULT_MIN_SIZE_DIVISOR, never below MIN_SIZE_STEPS float
+    steps of the largest coordinate) and the finest the whole band is halved to (floor if
+    min_size is given, else not below h / 2**WHOLE_BAND_DEPTH).  ParoctError if min_size
+    exceeds h."""
+    floor = h / DEFAULT_MIN_SIZE_DIVISOR if min_size is None else positive_number("min_size", min_size)
+    if floor > h * (1 + 1e-9):  # min_size = size, computed apart from it, may round above it
+        raise ParoctError(f"min_size = {floor:.6g} must be at most size = {h:.6g}: it is the finest boundary size "
+                          "refinement near thin places may reach")
+    floor = min(h, max(floor, MIN_SIZE_STEPS * np.spacing(_largest_coordinate(surface))))  # thin walls refine no further
+    return floor, floor if min_size is not None else max(floor, h / 2**WHOLE_BAND_DEPTH)
+
+
+def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_floor: float, budget: float,
+                     thin_features: bool, one_pass: Callable[[float], PassOutcome], notes: list[str],
+                     refine_locally: Callable[[MeshReport, str, ThinFeatures], LocalOutcome] | None = None) -> MeshResult:
+    """mesh()'s passes: one_pass(band) at band = field.size; while it loses (_losses) and
+    thin_features, refine_locally (if given) near the walls after the first, then the whole
+    band at halves of the size (skipping those refine_locally tried), down to whole_floor as
+    the budget allows, until a pass keeps the solid or a finer pass loses more with nothing
+    to explain it (touching parts).  Returns the last pass's result (or the best one kept),
+    its report noting the steps (notes first) and warning of what it lost.  ParoctError if
+    it keeps less than half the solid or has no tets."""
+    h = field.size
+    band, memory_bound, tried = h, False, list[float]()  # tried: whole-band sizes below h that a pass lost at
+    best: tuple | None = None  # the whole-band pass whose boundary is nearest the input's so far
+    kept_text = ""
+    while True:
+        result, lost, advice, walls, report, note = one_pass(band)
         if note:
             notes.append(note)
-        if thin_features and lost and band == h and walls is not None:
-            # The whole band at h / 2, h / 4, ... as memory allows, for _thin_locally to try
-            # where one is estimated at fewer tets than its next round; h / 2 only where
-            # halving can mend what the pass lost (HALVING_GAIN).  Not at whole_floor: should
-            # everything lose, the pass there is the one returned, as before session 34.
-            wholes, whole = [], h / 2
-            while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
-                wholes.append(whole)
-                whole /= 2
-            if _missed(report) or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
-                wholes = [s for s in wholes if s != h / 2]
-            local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes, progress,
-                                                           stage_seconds, asks)
-            if local is not None:
-                local.report.notes = [*notes, *local.report.notes]
-                return local
-            notes.extend(tried_notes)
-            if why:
-                notes.append(f"refining the band only near thin places: {why}; refining the whole band instead")
-                memory_bound = why == LOCAL_MEMORY
+        if refine_locally is not None and thin_features and lost and band == h and walls is not None:
+            local = refine_locally(report, lost, walls)
+            if local.result is not None:
+                return local.result
+            tried = local.tried
+            notes.extend(local.notes)
+            memory_bound = local.memory_bound
         # Parts touching along an edge or at a point have no wall or gap between them that a
         # size could resolve: they come out joined at every size, and the finer the band the
         # more lattice edges join them (two cubes sharing an edge, turned 30 and 40 degrees,
@@ -400,7 +458,7 @@ def mesh(
             break
         if lost and (best is None or (distance, abs(report.volume_error)) < (best[0], abs(best[3].volume_error))):
             best = (distance, result, lost, report, band)
-        # By halves, the coarsest first (skipping the sizes _thin_locally tried): what
+        # By halves, the coarsest first (skipping the sizes refine_locally tried): what
         # the rounds near thin places could not keep comes out joined or split at any size,
         # and a coarser band may keep what a finer one loses.  Going straight to two layers
         # across the thinnest wall, as before, took random unions and differences of boxes,
@@ -425,8 +483,11 @@ def mesh(
             floor_text = f"min_size = {floor:.4g} reached; "
         elif thin_features and memory_bound:
             floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
-        elif thin_features and band <= whole_floor * (1 + 1e-9):
+        elif thin_features and band <= whole_floor * (1 + 1e-9) and refine_locally is not None:
             floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
+        elif thin_features and band <= whole_floor * (1 + 1e-9):
+            floor_text = (f"the whole boundary refined to {band:.4g}, as far as it goes without min_size (finer only "
+                          "near thin places, which mesh() refines and meshing in ranges does not yet); ")
         _refuse_losing_too_much(report, band, f"{floor_text}{advice}")  # why it went no finer, then what would keep it
         report.warnings.append(f"{floor_text}{lost}" + (f"; {advice}" if advice else ""))
     return result

@@ -37,13 +37,14 @@ from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, ro
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
                      _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _losses, _mend, _pass_report,
-                     _refuse_losing_too_much, _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
-                     TetMesh, outside_bound, pass_frame, report_measures, report_snapshot, resolve_size, restore_report,
-                     vertex_classes, warn_bad_tets, warn_unresolved_cuts)
+                     _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
+                     PassOutcome, TetMesh, _walls_of_loss, halve_whole_band, outside_bound, pass_frame, report_measures,
+                     report_snapshot, resolve_size, restore_report, size_floors, vertex_classes, warn_bad_tets,
+                     warn_unresolved_cuts)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
-from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field
+from .sizing import OUTSIDE, UNDECIDED, SizeField, positive_number, size_field
 from .quality import OUTSIDE as OUTSIDE_BOUND
 from .range_finish import finish_in_ranges
 from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners, owned_boundary, repair_pinches_in_ranges
@@ -980,87 +981,128 @@ def merge_ranges(pieces: list[RangeMesh], frame: FatFrame, key_bounds: np.ndarra
 
 
 def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *, n_parts: int,
-                   divisions: float | None = None, max_size: float | None = None,
+                   divisions: float | None = None, max_size: float | None = None, thin_features: bool = True,
+                   min_size: float | None = None, max_memory: float | None = None,
                    mapper: Callable[..., Iterable] | None = None) -> MeshResult:
-    """One meshing pass at ``size`` (graded up to max_size, as mesh()) in n_parts ranges of
-    Morton keys (range_bounds, whole max_size octants; ranges left empty, as when they are
-    more than the octants the surface meets, are dropped): in each, the band from the triangles
-    near it (band_in_range), the octree from the band within one max_size octant of it
+    """mesh() in n_parts ranges of Morton keys (range_bounds, whole max_size octants; ranges
+    left empty, as when they are more than the octants the surface meets, are dropped).  A
+    pass (_pass_in_ranges) builds in each range the band from the triangles near it
+    (band_in_range), the octree from the band within one max_size octant of it
     (octree_in_range), and the tets of its leaves from them, the leaves touching them and the
-    band pieces it reads (mesh_range); their pinches repaired in the ranges (range_pinches:
+    band pieces it reads (mesh_range); their pinches are repaired in the ranges (range_pinches:
     only the boundary faces and the tets near pinches leave them) and the mesh finished in
     the ranges (range_finish: quality, topology, missed parts and compaction, as
     mesher._finish on the merged mesh), the result being the owners' points and the ranges'
     tets one after another.  No band or octree of the whole surface is built, and no mesh is
     merged but the result (merge_ranges only where the pinch repair must run on the whole).
 
+    thin_features, min_size, max_memory: as mesh(), but where a pass loses part of the solid
+    the whole band is refined by halves (mesher.halve_whole_band, mesh()'s own halving);
+    mesh() first refines only near the thin walls, which the ranges do not do yet.  So
+    the result is mesh()'s where that pass keeps the solid or mesh() too refines the whole
+    band, and a finer mesh where mesh() keeps it by refining near thin walls.  Curvature,
+    layers and the other asks are not done in ranges either.
+
     mapper(function, *iterables): runs each of the three stages over the ranges and returns
     their results in order, as the built-in map does (the default: one range after another);
     an executor's map (concurrent.futures.ProcessPoolExecutor().map, a Dask client's map and
     gather) runs them side by side: the functions and their arguments pickle.
 
-    The same tets and points as ``mesh(source, size, max_size=max_size, thin_features=False)``,
-    in another vertex order.  Where a tet leaves [10.7, 164.8] degrees, mesh() stuffs again and
-    mends by other warps (bunny at diag/30, uniform); so do the ranges, their lattice tets
-    (range_lattice) joined into one lattice (merge_range_lattices): the mending is not per
-    range yet.  Refinement near thin walls, curvature and the other asks are not done per
-    range yet either."""
+    A pass's tets and points are those of mesh()'s pass at its size (``mesh(source, size,
+    max_size=max_size, thin_features=False)`` for the first), in another vertex order.  Where
+    a tet leaves [10.7, 164.8] degrees, mesh() stuffs again and mends by other warps (bunny
+    at diag/30, uniform); so do the ranges, their lattice tets (range_lattice) joined into one
+    lattice (merge_range_lattices): the mending is not per range yet."""
     if isinstance(n_parts, (bool, np.bool_)) or not isinstance(n_parts, (int, np.integer)) or n_parts < 1:
         raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
     if mapper is not None and not callable(mapper):
         raise ParoctError(f"mapper = {mapper!r}: must be a function like map(function, *iterables), or None")
     if size is not None and divisions is not None:
         raise ParoctError(f"size = {size!r} and divisions = {divisions!r}: give one (size = diagonal / divisions)")
+    if not isinstance(thin_features, (bool, np.bool_)):
+        raise ParoctError(f"thin_features = {thin_features!r}: must be True or False")
     run = map if mapper is None else mapper
     n_parts = int(n_parts)
     surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
     h = resolve_size(surface, size, divisions)
-    field = _at_boundary_size(size_field(h, max_size), h)
-    _check_memory(surface, field, _available_memory())
-    report = _pass_report(surface, field, h, {})
+    field = size_field(h, max_size)
+    floor, whole_floor = size_floors(surface, h, min_size)
+    budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
+    _check_memory(surface, field, budget)
+    stage_seconds: dict = {}  # stage times add up over the passes
+    return halve_whole_band(surface, field, floor, whole_floor, budget, bool(thin_features),
+                            partial(_pass_in_ranges, surface, field, n_parts=n_parts, run=run,
+                                    stage_seconds=stage_seconds), [])
+
+
+def _pass_in_ranges(surface: Surface, field: SizeField, band: float, *, n_parts: int, run: Callable[..., Iterable],
+                    stage_seconds: dict) -> PassOutcome:
+    """mesh_in_ranges' pass with the whole band at size band (field: the request), as
+    mesher._mesh_at's: the result, what it lost, and where it lost, the advice and the walls
+    and gaps (mesher._walls_of_loss, over the whole surface)."""
+    attempt = _at_boundary_size(field, band)
+    report = _pass_report(surface, field, band, stage_seconds)
     stages = _Stages(report, None)
-    frame = pass_frame(field.size, surface, report)
+    frame = pass_frame(attempt.size, surface, report)
     stages.done("frame")
     snapped = rays.snap_surface(frame, surface.vertices)
     faces = np.ascontiguousarray(surface.faces, dtype=np.int64)
-    coarse = max(0, frame.levels - field.coarse_depth)  # the seeds' coarsest level: ranges are its octants
+    coarse = max(0, frame.levels - attempt.coarse_depth)  # the seeds' coarsest level: ranges are its octants
     # Ranges of whole coarse octants: past one per octant the surface meets, the rest are
     # empty, and are dropped (10**6 ranges of a 30 k-tet sphere took minutes, 0.6 ms each).
     # Past one range a surface vertex the bounds repeat (range_bounds splits by them): the same
     # ranges, with no array of n_parts bounds (10**30 ranges).
     key_bounds = np.unique(range_bounds(frame, snapped, min(n_parts, snapped.shape[0] + 1), coarse))
     firsts, ends = key_bounds[:-1].tolist(), key_bounds[1:].tolist()
-    band = _mapped(run, partial(band_in_range, frame, snapped, faces), firsts, ends, kind=BandPiece)
-    _in_order([p.surface_keys for p in band], firsts, ends)
-    report.unresolved_cuts = unresolved_cuts(band)
+    band_pieces = _mapped(run, partial(band_in_range, frame, snapped, faces), firsts, ends, kind=BandPiece)
+    _in_order([p.surface_keys for p in band_pieces], firsts, ends)
+    report.unresolved_cuts = unresolved_cuts(band_pieces)
     # Each range's octree reads the band and surface cells within one max_size octant of it.
-    near_surface = keys_near_ranges(np.concatenate([p.surface_keys for p in band]), coarse, key_bounds)
-    near_band = keys_near_ranges(np.concatenate([p.band_keys for p in band]), coarse, key_bounds)
-    octrees = _mapped(run, partial(octree_in_range, frame, snapped, faces, surface, field), near_surface, near_band,
+    near_surface = keys_near_ranges(np.concatenate([p.surface_keys for p in band_pieces]), coarse, key_bounds)
+    near_band = keys_near_ranges(np.concatenate([p.band_keys for p in band_pieces]), coarse, key_bounds)
+    octrees = _mapped(run, partial(octree_in_range, frame, snapped, faces, surface, attempt), near_surface, near_band,
                       firsts, ends, kind=tuple)
     _in_order([leaves for leaves, _ in octrees], firsts, ends)
     keys = np.concatenate([leaves for leaves, _ in octrees])
     levels = np.concatenate([leaf_levels for _, leaf_levels in octrees])
     report.n_leaves, report.leaf_levels = int(keys.shape[0]), _leaf_levels(frame, levels)
     stages.done("octree")
-    if keys.shape[0] == 0:
-        _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
-    bounds = np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees])
+    if keys.shape[0] == 0:  # no leaf inside: the solid is thinner than the lattice everywhere
+        result = MeshResult(TetMesh(np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int32)), report, surface,
+                            np.zeros((0, 3), dtype=np.int32), np.zeros(0, dtype=np.int32))
+    else:
+        result = _stuffed_in_ranges(surface, frame, band, keys, levels, key_bounds, band_pieces,
+                                    np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees]), run, report, stages)
+    lost = _losses(report, surface)
+    advice, walls = "", None
+    if lost:
+        crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
+        advice, walls = _walls_of_loss(surface, frame, snapped, faces, crossings, report)
+        stages.done("features")
+    return PassOutcome(result, lost, advice, walls, report, "")
+
+
+def _stuffed_in_ranges(surface: Surface, frame: FatFrame, size: float, keys: np.ndarray, levels: np.ndarray,
+                       key_bounds: np.ndarray, band: Sequence[BandPiece], bounds: np.ndarray,
+                       run: Callable[..., Iterable], report: MeshReport, stages: _Stages) -> MeshResult:
+    """The ranges' tets of the leaves (keys, levels: sorted, bounds: the first leaf of each
+    range and the end) stuffed, repaired and finished in the ranges, or mended as one where
+    a tet leaves the bound (mesh_in_ranges); size: the band's longest edge."""
+    firsts = key_bounds[:-1].tolist()
     pieces = _mapped(run, partial(_range_task, mesh_range, frame),
                      range_shares(frame, keys, levels, key_bounds, band, bounds), kind=RangeMesh, count=len(firsts))
     stages.done("stuff")
     numbering = number_ranges(pieces, frame, key_bounds)
-    # The pinches are repaired in the ranges (range_pinches): the merged mesh is only checked.
     parts = [range_tets(p, numbering, r) for r, p in enumerate(pieces)]
     owned = owned_boundary(parts, len(parts))  # the boundary, held by its owners
     fans = fans_by_owners(owned, len(parts))
     kept = repair_pinches_in_ranges(parts, len(parts), fans)
     fresh = report_snapshot(report)
     if kept is not None:
-        result = _finish_ranges(parts, kept, owned, fans, pieces, numbering.n_vertices, report, stages, surface, h)
+        result = _finish_ranges(parts, kept, owned, fans, pieces, numbering.n_vertices, report, stages, surface, size)
     else:  # the repair must run on the whole mesh (never seen on a mesher's mesh)
         points, tets, inside, targets, cut_faces = merge_ranges(pieces, frame, key_bounds, numbering)
-        result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, h)
+        result = _finish(points, tets, inside, targets, cut_faces, report, stages, surface, size)
     del parts
     if outside_bound(report):
         # As mesh(): stuffed again with every tet measured and other warps tried near the bad
@@ -1080,12 +1122,8 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         report.bad_tets = int(np.count_nonzero((flags & OUTSIDE_BOUND) != 0))
         stages.done("warps")
         assert cuts.faces is not None  # taken from the band
-        result = _finish(points, tets, inside, targets, cuts.faces, report, stages, surface, h)
+        result = _finish(points, tets, inside, targets, cuts.faces, report, stages, surface, size)
         warn_bad_tets(report)
-    lost = _losses(report, surface)
-    if lost:
-        _refuse_losing_too_much(report, h, "thin walls are not refined in ranges: use mesh()")
-        report.warnings.append(f"{lost} (thin walls are not refined in ranges)")
     return result
 
 
