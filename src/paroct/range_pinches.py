@@ -5,9 +5,11 @@ its tets, and only what lies on the boundary or near a pinch leaves it.
    tet of it has (range_boundary): its part of the boundary, and the faces it shares with
    other ranges.
 2. Each such face goes to the range owning its smallest vertex id, which drops those that
-   two ranges sent: the rest are the boundary.  Each boundary face then goes to the owners
-   of its vertices, and each owner finds which of its vertices are not manifold: the
-   pinches, as repair.remove_pinches finds them on the whole mesh (pinches_by_owners).
+   two ranges sent: the rest are the boundary (boundary_by_owners; owned_boundary does steps
+   1 and 2).  Each boundary face then goes to the owners of its vertices, which take the
+   fans around their vertices (fans_by_owners; range_finish reads them too), and each owner
+   finds which of its vertices are not manifold: the pinches, as repair.remove_pinches
+   finds them on the whole mesh (pinches_by_owners).
 3. Each range gives the tets around the pinches (tets_near, out to repair.PINCH_RINGS rings),
    which are repaired cluster by cluster (repair.repair_near_pinches), and drops those
    removed.
