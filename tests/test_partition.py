@@ -2,6 +2,7 @@
 the merged mesh against the one-process pass, tet for tet and bit for bit."""
 
 import dataclasses
+from functools import partial
 from pathlib import Path
 
 import manifold3d
@@ -296,6 +297,16 @@ def test_a_part_thinner_than_the_lattice_is_kept_by_halving_the_band_in_ranges()
     assert DIHEDRAL_BOUND[0] <= report.min_dihedral <= report.max_dihedral <= DIHEDRAL_BOUND[1]
     with pytest.raises(paroct.ParoctError, match="no tets"):
         mesh_in_ranges(surface, 0.1, n_parts=2, thin_features=False)
+
+
+@pytest.mark.parametrize("options, match", [({"thin_features": "yes"}, "thin_features = 'yes': must be True or False"),
+                                             ({"min_size": 1.0}, "min_size = 1 must be at most size"),
+                                             ({"max_memory": -1}, "max_memory = -1: must be a positive number"),
+                                             ({"max_memory": 10}, "more than the 10 bytes allowed")])
+def test_ranges_refuse_bad_thin_feature_options_as_mesh_does(options, match):
+    for mesher_call in (paroct.mesh, partial(mesh_in_ranges, n_parts=2)):
+        with pytest.raises(paroct.ParoctError, match=match):
+            mesher_call(DATA / "bunny.stl", divisions=10, **options)
 
 
 def test_ranges_that_reach_the_whole_bands_floor_say_so():
