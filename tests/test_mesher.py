@@ -473,6 +473,30 @@ def test_options_of_the_wrong_kind_are_refused_by_name(options, match):
         mesh(manifold3d.Manifold.cube([1.0, 1.0, 1.0]), **options)
 
 
+def test_progress_hears_each_stage_and_an_exception_from_it_cancels():
+    """progress is called with each stage's name as it ends, in order; an exception it raises
+    stops the meshing there and reaches the caller as it is (the way to cancel a long run)."""
+    box = manifold3d.Manifold.cube([1.0, 1.0, 1.0])
+    heard: list[str] = []
+    paroct.mesh(box, divisions=10, progress=heard.append)
+    assert heard[0] == "load" and heard[-1] == "quality"
+    assert [stage for stage in heard if stage in ("frame", "octree", "stuff", "quality")] == \
+        ["frame", "octree", "stuff", "quality"]
+
+    class Cancelled(Exception):
+        pass
+
+    def cancel_at_octree(stage: str) -> None:
+        heard.append(stage)
+        if stage == "octree":
+            raise Cancelled(stage)
+
+    heard.clear()
+    with pytest.raises(Cancelled, match="octree"):
+        paroct.mesh(box, divisions=10, progress=cancel_at_octree)
+    assert heard[-1] == "octree" and "stuff" not in heard
+
+
 def test_a_sphere_past_every_part_asks_its_size_everywhere():
     """A refinement sphere of radius 1e200 around the box asks its size on the whole box, as
     one of radius 10 does (its squared radius overflowed: OverflowError); a centre 1e300 away

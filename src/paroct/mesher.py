@@ -321,7 +321,8 @@ def mesh(
     False keeps size and only warns.  A mesh that keeps less than half the solid's volume
     raises ParoctError, as one with no tets does.  max_memory: bytes the run may use
     (default: the machine's available memory); a size that would need more is refused before
-    any work.  progress: called with each stage's name when it ends.
+    any work.  progress: called with each stage's name when it ends; an exception it raises
+    stops the meshing there and reaches the caller unchanged (the way to cancel a run).
     """
     t0 = time.perf_counter()
     if size is not None and divisions is not None:
