@@ -256,9 +256,9 @@ def test_a_range_share_holds_what_its_whole_pieces_would_give():
     before joining them: the same index (vertices, classes, warps, cut edges and points) as
     joining the whole pieces and keeping what those corners read, and its leaves are its own
     and touching ones, numbered locally."""
-    from paroct.partition import (BandIndex, _finest_corners, band_in_range, band_pieces_for, range_shares,
-                                  touching_leaves)
+    from paroct.frame import CUBE_CORNERS
     from paroct.octree import octant_lattice_anchors
+    from paroct.partition import BandIndex, band_in_range, band_pieces_for, range_shares, touching_leaves
 
     frame, snapped, faces, _, keys, levels, key_bounds = _graded_pass_in_ranges(25, 5)
     pieces = [band_in_range(frame, snapped, faces, int(key_bounds[r]), int(key_bounds[r + 1])) for r in range(5)]
@@ -273,9 +273,11 @@ def test_a_range_share_holds_what_its_whole_pieces_would_give():
                                                                          keys[first:end])
         assert np.array_equal(share.keys[share.around], keys[around])
         read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
-        corners = _finest_corners(octant_lattice_anchors(keys[rows], frame),
-                                  np.int64(1) << (frame.levels - levels[rows].astype(np.int64)))
-        want = BandIndex.from_pieces([pieces[i] for i in read]).near(corners)
+        # The corners of its finest leaves, listed: the band vertices it reads are among them.
+        anchors = octant_lattice_anchors(keys[rows], frame)[levels[rows] == frame.levels]
+        corners = (anchors[:, None, :] + CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+        whole = BandIndex.from_pieces([pieces[i] for i in read])
+        want = whole.near(np.flatnonzero(np.isin(whole.vertex_keys, pack_coords(corners))))
         for name in ("vertex_keys", "coords", "inside", "target_keys", "keys", "starts", "ends", "directions",
                      "points", "faces"):
             assert np.array_equal(getattr(share.band, name), getattr(want, name)), (r, name)
@@ -632,6 +634,24 @@ def test_ranges_repair_pinches_as_the_one_pass_does(monkeypatch):
             assert np.array_equal(got, expected), n_parts
         monkeypatch.undo()
         _assert_same_finish(ranged, whole, n_parts)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_points_on_finest_leaves_match_the_leaves_corners_listed(seed):
+    """partition._on_finest_leaves (eight binary searches a point) against the set of the
+    corners of every finest leaf, on random leaves and random points, some on the frame's
+    edges and outside it."""
+    from paroct.frame import CUBE_CORNERS
+    from paroct.partition import _on_finest_leaves
+
+    rng = np.random.default_rng(6100 + seed)
+    levels = 4
+    cells = np.unique(rng.integers(0, 1 << levels, size=(int(rng.integers(1, 300)), 3)), axis=0)
+    fine_keys = np.sort(octant.morton_keys(cells << (ML - levels)))
+    corners = {tuple(c) for c in (cells[:, None, :] + CUBE_CORNERS[None, :, :]).reshape(-1, 3).tolist()}
+    points = rng.integers(-1, (1 << levels) + 2, size=(400, 3)).astype(np.int64)
+    got = _on_finest_leaves(points, fine_keys, ML - levels)
+    assert got.tolist() == [tuple(p) in corners for p in points.tolist()] and got.any()
 
 
 @pytest.mark.parametrize("seed", range(4))

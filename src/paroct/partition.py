@@ -630,18 +630,17 @@ class BandIndex:
         return cls(vertex_sorted, coords[v], inside[v], target_keys[v], keys_sorted, starts[e], ends[e], directions[e],
                    fracs[e], points[e], faces[e])
 
-    def vertices_at(self, coords: np.ndarray) -> np.ndarray:
-        """Indices (ascending, distinct) of the band vertices among coords (K, 3)."""
-        at, found = sorted_lookup(self.vertex_keys, pack_coords(coords))
-        marked = np.zeros(self.vertex_keys.shape[0], dtype=bool)  # not np.unique: a leaf's 8 corners each
-        marked[at[found]] = True
-        return np.flatnonzero(marked)
+    def vertices_on(self, fine_keys: np.ndarray, frame: FatFrame) -> np.ndarray:
+        """Indices (ascending) of the band vertices that are a corner of a finest leaf among
+        fine_keys (sorted keys of leaves of frame.levels): every band vertex a set of leaves
+        has as a corner, since a band vertex is a corner of a finest band cell, which touches
+        every leaf with the vertex as a corner."""
+        return np.flatnonzero(_on_finest_leaves(self.coords, fine_keys, MAX_LEVEL - frame.levels))
 
-    def near(self, corners: np.ndarray) -> BandIndex:
-        """The part of the index a range whose leaves have these corners (K, 3) reads: the
-        band vertices among them, the cut edges with both ends among those (every mixed edge
-        of its tets) and the edges those vertices warp onto."""
-        v = self.vertices_at(corners)
+    def near(self, v: np.ndarray) -> BandIndex:
+        """The part of the index a range whose band vertices are v (ascending indices:
+        vertices_on its leaves) reads: those vertices, the cut edges with both ends among them
+        (every mixed edge of its tets) and the edges they warp onto."""
         vertex_keys = self.vertex_keys[v]
         held = sorted_lookup(vertex_keys, pack_coords(self.starts))[1] & sorted_lookup(vertex_keys,
                                                                                         pack_coords(self.ends))[1]
@@ -725,13 +724,44 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
                      inside[lattice], target_keys, target_faces, band.keys[cut_edges_used], band.faces[cut_edges_used])
 
 
-def _finest_corners(anchors: np.ndarray, sides: np.ndarray) -> np.ndarray:
-    """The corners (K, 3) of the finest leaves (side 1) of leaves (anchors (L, 3), sides (L,)):
-    every band vertex a leaf among them has as a corner.  (A band vertex is a corner of a
-    finest band cell, and that cell touches every leaf with the vertex as a corner, so it is
-    among the leaves where they are a range's own and touching ones.)"""
-    finest = sides == 1
-    return (anchors[finest][:, None, :] + CUBE_CORNERS[None, :, :]).reshape(-1, 3)
+@nb.njit(cache=True, parallel=True)
+def _on_finest_leaves(coords, fine_keys, shift):
+    """Mask (P,) of the lattice points coords (P, 3) that are a corner of a leaf among
+    fine_keys (sorted keys of finest leaves, octree coordinates: lattice << shift): one of
+    the 8 cells with the point as a corner (those of non-negative anchor) is among them.
+    The leaves' box rejects most points of the pieces a range reads (their neighbours'); the
+    others cost up to eight binary searches.  (Listing the leaves' corners and sorting them
+    out took a quarter of a range's time, tray_bottom at diag/320 in 1 range.)"""
+    out = np.zeros(coords.shape[0], dtype=np.bool_)
+    n = fine_keys.shape[0]
+    if n == 0:
+        return out
+    lo = np.full(3, np.int64(1) << 62)
+    hi = np.full(3, np.int64(-1))
+    for k in range(n):  # the leaves' box, in lattice units
+        x, y, z = morton_coords(fine_keys[k])
+        for a, v in enumerate((x >> shift, y >> shift, z >> shift)):
+            lo[a] = min(lo[a], v)
+            hi[a] = max(hi[a], v)
+    for i in nb.prange(coords.shape[0]):
+        x, y, z = coords[i, 0], coords[i, 1], coords[i, 2]
+        if x < lo[0] or x > hi[0] + 1 or y < lo[1] or y > hi[1] + 1 or z < lo[2] or z > hi[2] + 1:
+            continue
+        for c in range(8):
+            ax, ay, az = x - (c & 1), y - ((c >> 1) & 1), z - ((c >> 2) & 1)
+            if ax < 0 or ay < 0 or az < 0:
+                continue
+            key = morton_key(ax << shift, ay << shift, az << shift)
+            j = np.searchsorted(fine_keys, key)
+            if j < n and fine_keys[j] == key:
+                out[i] = True
+                break
+    return out
+
+
+def _finest_keys(keys: np.ndarray, levels: np.ndarray, frame: FatFrame) -> np.ndarray:
+    """The keys (sorted, as keys are) of the leaves of the frame's finest level."""
+    return np.compress(levels == frame.levels, keys)
 
 
 def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int, end: int,
@@ -746,7 +776,7 @@ def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, b
     own = np.arange(before, before + end - first)
     anchors = octant_lattice_anchors(keys[rows], frame)
     sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
-    in_range = band.vertices_at(_finest_corners(anchors, sides))
+    in_range = band.vertices_on(_finest_keys(keys[rows], levels[rows], frame), frame)
     vertices = number_vertices(anchors, sides, prefix=band.coords[in_range], eager=False)
     inside = vertex_classes(vertices, band.inside[in_range])
     # A touching leaf may have band corners in pieces the range does not read, and spread a
@@ -1208,22 +1238,22 @@ def range_shares(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_boun
         rows = np.sort(np.concatenate([np.arange(first, end), around]))
         read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
         before = int(np.searchsorted(around, first))
-        corners = _finest_corners(octant_lattice_anchors(keys[rows], frame),
-                                  np.int64(1) << (frame.levels - levels[rows].astype(np.int64)))
+        fine_keys = _finest_keys(keys[rows], levels[rows], frame)
         local_around = np.concatenate([np.arange(before), np.arange(before + end - first, rows.shape[0])])
-        corner_keys = np.unique(pack_coords(corners))
-        near = BandIndex.from_pieces([_piece_near(band[i], corner_keys) for i in read]).near(corners)
-        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around, near)
+        index = BandIndex.from_pieces([_piece_near(band[i], fine_keys, frame) for i in read])
+        yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around,
+                         index.near(index.vertices_on(fine_keys, frame)))
 
 
-def _piece_near(piece: BandPiece, corner_keys: np.ndarray) -> BandPiece:
-    """The part of a band piece that BandIndex.near(corners) can keep (corner_keys: the
-    corners' pack_coords, sorted, distinct): its vertices among them, its edges with both
-    ends among them, and the edges those vertices warp onto.  Joining these parts instead of
-    the whole pieces sorts only what a range reads."""
-    kept = sorted_lookup(corner_keys, pack_coords(piece.coords))[1]
-    edge_kept = sorted_lookup(corner_keys, pack_coords(piece.edge_starts))[1] & \
-        sorted_lookup(corner_keys, pack_coords(piece.edge_ends))[1]
+def _piece_near(piece: BandPiece, fine_keys: np.ndarray, frame: FatFrame) -> BandPiece:
+    """The part of a band piece that BandIndex.near can keep for a range whose finest leaves
+    are fine_keys (sorted): its vertices on those leaves (BandIndex.vertices_on), its edges
+    with both ends on them, and the edges those vertices warp onto.  Joining these parts
+    instead of the whole pieces sorts only what a range reads."""
+    shift = MAX_LEVEL - frame.levels
+    kept = _on_finest_leaves(piece.coords, fine_keys, shift)
+    edge_kept = _on_finest_leaves(piece.edge_starts, fine_keys, shift) & \
+        _on_finest_leaves(piece.edge_ends, fine_keys, shift)
     targets = piece.targets[kept]
     edge_kept[targets[targets >= 0]] = True
     new_edge = np.cumsum(edge_kept) - 1
