@@ -638,11 +638,12 @@ def test_ranges_repair_pinches_as_the_one_pass_does(monkeypatch):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_points_on_finest_leaves_match_the_leaves_corners_listed(seed):
-    """partition._on_finest_leaves (eight binary searches a point) against the set of the
+    """partition.FinestLeaves.corners_among (eight binary searches a point) against the set of the
     corners of every finest leaf, on random leaves and random points, some on the frame's
     edges and outside it."""
     from paroct.frame import CUBE_CORNERS
-    from paroct.partition import _on_finest_leaves
+    from paroct.frame import FatFrame
+    from paroct.partition import finest_leaves
 
     rng = np.random.default_rng(6100 + seed)
     levels = 4
@@ -650,7 +651,8 @@ def test_points_on_finest_leaves_match_the_leaves_corners_listed(seed):
     fine_keys = np.sort(octant.morton_keys(cells << (ML - levels)))
     corners = {tuple(c) for c in (cells[:, None, :] + CUBE_CORNERS[None, :, :]).reshape(-1, 3).tolist()}
     points = rng.integers(-1, (1 << levels) + 2, size=(400, 3)).astype(np.int64)
-    got = _on_finest_leaves(points, fine_keys, ML - levels)
+    frame = FatFrame(np.zeros(3), 1.0, levels)
+    got = finest_leaves(fine_keys, np.full(fine_keys.shape[0], levels, dtype=np.int8), frame).corners_among(points)
     assert got.tolist() == [tuple(p) in corners for p in points.tolist()] and got.any()
 
 

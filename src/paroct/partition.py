@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable, Iterable, Iterator, Sequence
+from typing import Callable, Iterable, Iterator, NamedTuple, Sequence
 
 import numba as nb
 import numpy as np
@@ -218,7 +218,11 @@ def _octants_near_interval(keys, level, cell_level, first, end):
     box_lo, box_hi, stack, lo, hi = _interval_tests(first, end, cell_level)
     shift = MAX_LEVEL - cell_level
     side = np.int64(1) << (MAX_LEVEL - level)
+    cell_bits = ~((np.int64(1) << (3 * shift)) - 1)
     for i in range(keys.shape[0]):
+        if first <= (keys[i] & cell_bits) < end:  # the cell at its anchor is the interval's: most keys a range asks of
+            out[i] = True
+            continue
         x, y, z = morton_coords(keys[i])
         lo[0], lo[1], lo[2] = max((x >> shift) - 1, 0), max((y >> shift) - 1, 0), max((z >> shift) - 1, 0)
         hi[0] = min(((x + side - 1) >> shift) + 1, top)
@@ -630,12 +634,11 @@ class BandIndex:
         return cls(vertex_sorted, coords[v], inside[v], target_keys[v], keys_sorted, starts[e], ends[e], directions[e],
                    fracs[e], points[e], faces[e])
 
-    def vertices_on(self, fine_keys: np.ndarray, frame: FatFrame) -> np.ndarray:
-        """Indices (ascending) of the band vertices that are a corner of a finest leaf among
-        fine_keys (sorted keys of leaves of frame.levels): every band vertex a set of leaves
-        has as a corner, since a band vertex is a corner of a finest band cell, which touches
-        every leaf with the vertex as a corner."""
-        return np.flatnonzero(_on_finest_leaves(self.coords, fine_keys, MAX_LEVEL - frame.levels))
+    def vertices_on(self, leaves: FinestLeaves) -> np.ndarray:
+        """Indices (ascending) of the band vertices that are a corner of one of a range's
+        finest leaves: every band vertex its leaves have as a corner, since a band vertex is a
+        corner of a finest band cell, which touches every leaf with the vertex as a corner."""
+        return np.flatnonzero(leaves.corners_among(self.coords))
 
     def near(self, v: np.ndarray) -> BandIndex:
         """The part of the index a range whose band vertices are v (ascending indices:
@@ -724,25 +727,49 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
                      inside[lattice], target_keys, target_faces, band.keys[cut_edges_used], band.faces[cut_edges_used])
 
 
-@nb.njit(cache=True, parallel=True)
-def _on_finest_leaves(coords, fine_keys, shift):
-    """Mask (P,) of the lattice points coords (P, 3) that are a corner of a leaf among
-    fine_keys (sorted keys of finest leaves, octree coordinates: lattice << shift): one of
-    the 8 cells with the point as a corner (those of non-negative anchor) is among them.
-    The leaves' box rejects most points of the pieces a range reads (their neighbours'); the
-    others cost up to eight binary searches.  (Listing the leaves' corners and sorting them
-    out took a quarter of a range's time, tray_bottom at diag/320 in 1 range.)"""
-    out = np.zeros(coords.shape[0], dtype=np.bool_)
-    n = fine_keys.shape[0]
-    if n == 0:
-        return out
+class FinestLeaves(NamedTuple):
+    """A range's leaves of the frame's finest level: keys (L,) sorted, in octree coordinates
+    (lattice << shift), and the box lo..hi ((3,) int64, lattice units) of their anchors."""
+
+    keys: np.ndarray
+    shift: int
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def corners_among(self, coords: np.ndarray) -> np.ndarray:
+        """Mask (P,) of the lattice points coords (P, 3) that are a corner of one of the leaves."""
+        return _on_finest_leaves(np.ascontiguousarray(coords, dtype=np.int64), self.keys, self.shift, self.lo, self.hi)
+
+
+def finest_leaves(keys: np.ndarray, levels: np.ndarray, frame: FatFrame) -> FinestLeaves:
+    """FinestLeaves of the leaves (keys, levels: sorted) at the frame's finest level."""
+    fine = np.compress(levels == frame.levels, keys)
+    lo, hi = _leaf_box(fine, MAX_LEVEL - frame.levels)
+    return FinestLeaves(fine, MAX_LEVEL - frame.levels, lo, hi)
+
+
+@nb.njit(cache=True)
+def _leaf_box(keys, shift):
+    """The box (lo (3,), hi (3,)) in lattice units of the anchors of octants keys (empty:
+    lo above hi)."""
     lo = np.full(3, np.int64(1) << 62)
     hi = np.full(3, np.int64(-1))
-    for k in range(n):  # the leaves' box, in lattice units
-        x, y, z = morton_coords(fine_keys[k])
-        for a, v in enumerate((x >> shift, y >> shift, z >> shift)):
-            lo[a] = min(lo[a], v)
-            hi[a] = max(hi[a], v)
+    for k in range(keys.shape[0]):
+        x, y, z = morton_coords(keys[k])
+        lo[0], lo[1], lo[2] = min(lo[0], x >> shift), min(lo[1], y >> shift), min(lo[2], z >> shift)
+        hi[0], hi[1], hi[2] = max(hi[0], x >> shift), max(hi[1], y >> shift), max(hi[2], z >> shift)
+    return lo, hi
+
+
+@nb.njit(cache=True, parallel=True)
+def _on_finest_leaves(coords, fine_keys, shift, lo, hi):
+    """FinestLeaves.corners_among: whether one of the 8 cells with the point as a corner (those
+    of non-negative anchor) is among fine_keys (anchors in lo..hi).  The box rejects most
+    points of the pieces a range reads (their neighbours'); the others cost up to eight
+    binary searches.  (Listing the leaves' corners and sorting them out took a quarter of a
+    range's time, tray_bottom at diag/320 in 1 range.)"""
+    out = np.zeros(coords.shape[0], dtype=np.bool_)
+    n = fine_keys.shape[0]
     for i in nb.prange(coords.shape[0]):
         x, y, z = coords[i, 0], coords[i, 1], coords[i, 2]
         if x < lo[0] or x > hi[0] + 1 or y < lo[1] or y > hi[1] + 1 or z < lo[2] or z > hi[2] + 1:
@@ -759,11 +786,6 @@ def _on_finest_leaves(coords, fine_keys, shift):
     return out
 
 
-def _finest_keys(keys: np.ndarray, levels: np.ndarray, frame: FatFrame) -> np.ndarray:
-    """The keys (sorted, as keys are) of the leaves of the frame's finest level."""
-    return np.compress(levels == frame.levels, keys)
-
-
 def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: BandIndex, first: int, end: int,
                         around: np.ndarray | None) -> tuple[LeafVertices, np.ndarray, np.ndarray, np.ndarray]:
     """mesh_range's lattice: (the vertices of the range's own and touching leaves, their
@@ -776,7 +798,7 @@ def _range_lattice_tets(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, b
     own = np.arange(before, before + end - first)
     anchors = octant_lattice_anchors(keys[rows], frame)
     sides = np.int64(1) << (frame.levels - levels[rows].astype(np.int64))
-    in_range = band.vertices_on(_finest_keys(keys[rows], levels[rows], frame), frame)
+    in_range = band.vertices_on(finest_leaves(keys[rows], levels[rows], frame))
     vertices = number_vertices(anchors, sides, prefix=band.coords[in_range], eager=False)
     inside = vertex_classes(vertices, band.inside[in_range])
     # A touching leaf may have band corners in pieces the range does not read, and spread a
@@ -1238,22 +1260,20 @@ def range_shares(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, key_boun
         rows = np.sort(np.concatenate([np.arange(first, end), around]))
         read = band_pieces_for(keys, levels, rows, frame.levels, key_bounds)
         before = int(np.searchsorted(around, first))
-        fine_keys = _finest_keys(keys[rows], levels[rows], frame)
+        leaves = finest_leaves(keys[rows], levels[rows], frame)
         local_around = np.concatenate([np.arange(before), np.arange(before + end - first, rows.shape[0])])
-        index = BandIndex.from_pieces([_piece_near(band[i], fine_keys, frame) for i in read])
+        index = BandIndex.from_pieces([_piece_near(band[i], leaves) for i in read])
         yield RangeShare(keys[rows], levels[rows], before, before + end - first, local_around,
-                         index.near(index.vertices_on(fine_keys, frame)))
+                         index.near(index.vertices_on(leaves)))
 
 
-def _piece_near(piece: BandPiece, fine_keys: np.ndarray, frame: FatFrame) -> BandPiece:
+def _piece_near(piece: BandPiece, leaves: FinestLeaves) -> BandPiece:
     """The part of a band piece that BandIndex.near can keep for a range whose finest leaves
-    are fine_keys (sorted): its vertices on those leaves (BandIndex.vertices_on), its edges
-    with both ends on them, and the edges those vertices warp onto.  Joining these parts
-    instead of the whole pieces sorts only what a range reads."""
-    shift = MAX_LEVEL - frame.levels
-    kept = _on_finest_leaves(piece.coords, fine_keys, shift)
-    edge_kept = _on_finest_leaves(piece.edge_starts, fine_keys, shift) & \
-        _on_finest_leaves(piece.edge_ends, fine_keys, shift)
+    these are: its vertices on those leaves (BandIndex.vertices_on), its edges with both ends
+    on them, and the edges those vertices warp onto.  Joining these parts instead of the
+    whole pieces sorts only what a range reads."""
+    kept = leaves.corners_among(piece.coords)
+    edge_kept = leaves.corners_among(piece.edge_starts) & leaves.corners_among(piece.edge_ends)
     targets = piece.targets[kept]
     edge_kept[targets[targets >= 0]] = True
     new_edge = np.cumsum(edge_kept) - 1
