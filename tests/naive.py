@@ -760,7 +760,7 @@ def faces_over_rows(snapped: np.ndarray, faces: np.ndarray, bits: int, basis: np
 
 
 def owned_ids(keys, owners):
-    """partition.owned_ids by a dict: every distinct (owner, key) pair, sorted, numbered in
+    """owners.owned_ids by a dict: every distinct (owner, key) pair, sorted, numbered in
     that order; returns (the ids of each piece's keys, the count)."""
     pairs = sorted({(int(o), int(k)) for piece_keys, piece_owners in zip(keys, owners)
                     for k, o in zip(piece_keys, piece_owners)})

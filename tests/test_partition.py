@@ -220,9 +220,9 @@ def test_joined_range_lattices_are_the_whole_octrees_lattice():
 
 @pytest.mark.parametrize("seed", range(6))
 def test_owned_ids_number_each_key_once_by_owner_then_key(seed):
-    """owned_ids against a dict of every (owner, key) pair: pieces with repeated keys, keys
-    shared between pieces, owners with no key, an empty piece."""
-    from paroct.partition import owned_ids
+    """owners.owned_ids against a dict of every (owner, key) pair: pieces with repeated keys,
+    keys shared between pieces, owners with no key, an empty piece."""
+    from paroct.owners import owned_ids
 
     rng = np.random.default_rng(seed)
     n_ranges = int(rng.integers(1, 7))

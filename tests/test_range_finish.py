@@ -120,3 +120,18 @@ def test_compaction_by_owners_is_the_joined_meshs(seed):
     assert np.array_equal(compaction.points, want_points)
     assert np.array_equal(np.concatenate(renumbered), want_tets)
     assert np.array_equal(compaction.point_faces, faces_of[by_id][new_id >= 0])
+
+
+def test_compaction_refuses_ranges_that_place_a_shared_point_differently():
+    """Two ranges holding the same mesh point at two positions: an AssertionError, not a mesh
+    with one of them."""
+    tets = np.array([[0, 1, 2, 3]], dtype=np.int32)
+    points = np.eye(4, 3)
+    moved = points.copy()
+    moved[2] += 1e-12
+    parts = [RangeTets(np.arange(4), tets, np.zeros(4, dtype=bool), at, np.zeros(4, dtype=np.int64))
+             for at in (points, moved)]
+    faces = [np.full(4, -1, dtype=np.int32)] * 2
+    assert np.array_equal(compact_by_owners(parts[:1] * 2, faces, 4, 1).points, points)
+    with pytest.raises(AssertionError, match="place a point they share differently"):
+        compact_by_owners(parts, faces, 4, 1)

@@ -46,6 +46,7 @@ from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
 from .sizing import OUTSIDE, UNDECIDED, SizeField, positive_number, size_field
 from .quality import OUTSIDE as OUTSIDE_BOUND
+from .owners import owned_ids
 from .range_finish import finish_in_ranges
 from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners, owned_boundary, repair_pinches_in_ranges
 from .stuffing import CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
@@ -922,35 +923,6 @@ def point_owners(frame: FatFrame, coords: np.ndarray, key_bounds: np.ndarray) ->
     return np.searchsorted(key_bounds, morton_keys(np.ascontiguousarray(cells)), side="right") - 1
 
 
-def owned_ids(keys: Sequence[np.ndarray], owners: Sequence[np.ndarray], n_ranges: int) -> tuple[list[np.ndarray], int]:
-    """Ids 0..K-1 of the K distinct keys that pieces hold (keys[i] (N_i,) int64, owners[i]
-    (N_i,): the range owning each, a function of the key), numbered with no sort of them all:
-    each piece sends its keys to their owners, each owner numbers the distinct keys it
-    receives in ascending order, an exclusive scan of the owners' counts gives each owner its
-    first id, and each piece reads its keys' ids back from their owners.  Returns (the ids of
-    each piece's keys, K).  (Here a send is a list append; between workers it is one
-    exchange each way, and the scan a reduction of one count a range.)"""
-    received: list[list[np.ndarray]] = [[] for _ in range(n_ranges)]
-    grouped = []
-    for piece_keys, piece_owners in zip(keys, owners):
-        order = np.argsort(piece_owners, kind="stable")
-        bounds = np.searchsorted(piece_owners[order], np.arange(n_ranges + 1))
-        to = np.flatnonzero(np.diff(bounds))
-        for r in to:
-            received[r].append(piece_keys[order[bounds[r]:bounds[r + 1]]])
-        grouped.append((order, bounds, to))
-    owned = [np.unique(np.concatenate(part)) if part else np.zeros(0, dtype=np.int64) for part in received]
-    first = np.concatenate([[0], np.cumsum([o.shape[0] for o in owned])]).astype(np.int64)
-    ids = []
-    for piece_keys, (order, bounds, to) in zip(keys, grouped):
-        piece_ids = np.empty(piece_keys.shape[0], dtype=np.int64)
-        for r in to:
-            rows = order[bounds[r]:bounds[r + 1]]
-            piece_ids[rows] = first[r] + np.searchsorted(owned[r], piece_keys[rows])
-        ids.append(piece_ids)
-    return ids, int(first[-1])
-
-
 @dataclass(frozen=True)
 class RangeNumbering:
     """The mesh's ids of the ranges' points (number_ranges): vertex_ids[r] (V_r,) of piece r's
@@ -1299,5 +1271,5 @@ def unresolved_cuts(pieces: Sequence[BandPiece]) -> int:
 __all__ = ["BandIndex", "BandPiece", "RangeLattice", "RangeMesh", "band_in_range", "band_pieces_for", "edge_keys",
            "faces_over_box_rows", "faces_over_rows", "finest_band_in_ranges", "keys_near_ranges",
            "merge_band_pieces", "merge_range_lattices", "merge_ranges", "mesh_in_ranges", "mesh_range", "number_ranges",
-           "octree_in_range", "owned_ids", "pack_coords", "point_owners", "range_bounds", "range_lattice",
+           "octree_in_range", "pack_coords", "point_owners", "range_bounds", "range_lattice",
            "range_shares", "range_tets", "RangeNumbering", "RangeShare", "touching_leaves", "unpack_coords", "unresolved_cuts"]

@@ -16,10 +16,11 @@ use leaving it.
    vertices only), and the joined labels are the components.
 4. Missed parts: each owner marks the surface vertices and long triangles' centres near
    the boundary points it holds; those no owner marks are missed (mesher._measure_misses).
-5. Compaction: each range sends the points its tets use (id, position, surface triangle) to
-   their owners; each owner keeps the distinct ones in ascending id, an exclusive scan of
-   the owners' counts (lattice vertices first, then cut points, as the ids run) gives the
-   first new id of each, and each range renumbers its tets with the ids read back.
+5. Compaction: each range sends the ids of the points its tets use to their owners, which
+   number them (owners.owned_ids: each owner its distinct ids in ascending order, then an
+   exclusive scan of the owners' counts; lattice vertices first, then cut points, as the
+   ids run); each range renumbers its tets with the ids read back and writes its points'
+   positions and surface triangles into the result.
 
 The result is mesher._finish's on the ranges' tets joined in range order: the same points,
 tets, point triangles, quality, topology and missed parts; the volume is summed in another
@@ -38,9 +39,11 @@ import numpy as np
 from .check import far_from_points, long_triangle_centres
 from .mesher import FAT_RADIUS_RATIO, MISS_REACH
 from .quality import TetSummary, merged_summaries, summarize
-from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners, owned_numbering
+from .owners import owned_ids, rows_by_owner
+from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners
+from .repair import renumbered
 from .surface import Surface, bounding_box
-from .topology import SurfaceTopology, component_roots, nonmanifold_of_fans, union, used_vertices
+from .topology import SurfaceTopology, component_roots, local_vertex_ids, nonmanifold_of_fans, union, used_vertices
 
 
 @dataclass(frozen=True)
@@ -77,7 +80,7 @@ def finish_in_ranges(parts: Sequence[RangeTets], owned: Sequence[BoundaryFaces],
     topology = topology_by_owners(owned, fans_by_owners(owned, n_ranges) if fans is None else fans)
     missed_vertices, missed_faces = misses_by_owners(owned, parts, surface, size)
     compaction = compact_by_owners(parts, point_faces, n_vertices, n_ranges)
-    tets = [_renumbered(p.tets, new_id) for p, new_id in zip(parts, compaction.new_ids)]
+    tets = [renumbered(p.tets, new_id) for p, new_id in zip(parts, compaction.new_ids)]
     boundary = []
     for held in owned:  # each face's new ids from the range that sent it
         n = held.faces.shape[0]
@@ -96,16 +99,6 @@ def _from_senders(held: BoundaryFaces, columns: Sequence[np.ndarray], face: np.n
     for r in np.unique(sender):
         rows = np.flatnonzero(sender == r)
         out[rows] = columns[r][held.local[face[rows], corner[rows]]]
-    return out
-
-
-@nb.njit(cache=True, parallel=True)
-def _renumbered(tets, new_id):
-    """new_id[tets] (M, 4) int32, in one parallel pass."""
-    out = np.empty(tets.shape, dtype=np.int32)
-    for t in nb.prange(tets.shape[0]):
-        for k in range(4):
-            out[t, k] = new_id[tets[t, k]]
     return out
 
 
@@ -161,9 +154,8 @@ def _joined_components(fans: Sequence[OwnerFans]) -> int:
     inbox: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in fans]
     for o, (held, label) in enumerate(zip(fans, labels)):
         foreign = np.flatnonzero(held.owner_of != o)
-        for p in np.unique(held.owner_of[foreign]):
-            rows = foreign[held.owner_of[foreign] == p]
-            inbox[p].append((held.vertex_of[rows], label[rows]))
+        for p, rows in rows_by_owner(held.owner_of[foreign], len(fans)):
+            inbox[p].append((held.vertex_of[foreign[rows]], label[foreign[rows]]))
     joined = [(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))]
     for held, label, received in zip(fans, labels, inbox):
         if not received:
@@ -199,13 +191,22 @@ def misses_by_owners(owned: Sequence[BoundaryFaces], parts: Sequence[RangeTets],
     for held in owned:
         if held.faces.shape[0] == 0:
             continue
-        _, first = owned_numbering(held)  # each boundary point once, from the first face using it
-        points = _from_senders(held, positions, *np.divmod(first, 3))
+        points = _from_senders(held, positions, *np.divmod(_first_uses(held.faces), 3))  # each boundary point once
         lo, hi, _ = bounding_box(points)  # one pass: numpy's axis-0 reductions stride
         near_box = np.all((queries >= lo - reach) & (queries <= hi + reach), axis=1)
         rows = np.flatnonzero(near_box & far)
         far[rows] = far_from_points(queries[rows], points, reach)
     return np.flatnonzero(far[:n]), long[far[n:]]
+
+
+def _first_uses(faces: np.ndarray) -> np.ndarray:
+    """The position (B,) in faces.ravel() (F, 3) where each distinct id is first used, in order
+    of first use."""
+    local, vertex_of = local_vertex_ids(faces)
+    first = np.empty(vertex_of.shape[0], dtype=np.int64)
+    flat = local.ravel()
+    first[flat[::-1]] = np.arange(flat.shape[0] - 1, -1, -1)  # the last write is the first use
+    return first
 
 
 @dataclass(frozen=True)
@@ -222,54 +223,29 @@ class Compaction:
 def compact_by_owners(parts: Sequence[RangeTets], point_faces: Sequence[np.ndarray], n_vertices: int,
                       n_ranges: int) -> Compaction:
     """The points the parts' tets use, numbered as mesher._compact numbers them on the joined
-    mesh (ascending mesh id: lattice vertices, then cut points), by their owners (the module's
-    step 5).  A point two ranges place or put on a surface triangle differently is an
-    AssertionError: stuffing in ranges must agree where they meet."""
-    inbox: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = [[] for _ in range(n_ranges)]
-    # What each range sent: its used rows by owner, where each owner's rows start, the owners,
-    # and from which row on each owner put them.
-    sent = []
-    for part, faces in zip(parts, point_faces):
-        used = np.flatnonzero(used_vertices(part.tets, part.ids.shape[0]))
-        by_owner = np.argsort(part.owners[used], kind="stable")
-        bounds = np.searchsorted(part.owners[used][by_owner], np.arange(n_ranges + 1))
-        to = np.flatnonzero(np.diff(bounds)).tolist()
-        starts = []
-        for owner in to:
-            rows = used[by_owner[bounds[owner]:bounds[owner + 1]]]
-            starts.append(sum(ids.shape[0] for ids, _, _ in inbox[owner]))
-            inbox[owner].append((part.ids[rows], part.points[rows], faces[rows]))
-        sent.append((used[by_owner], bounds, to, starts))
-    # Each owner numbers the distinct ids it received: ascending, its lattice vertices before its cut points.
-    numbered = []
-    for o, received in enumerate(inbox):
-        ids, positions, triangles = (np.concatenate(column) for column in zip(*received)) if received else \
-            (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0, dtype=np.int32))
-        distinct, first_row, row_of = np.unique(ids, return_index=True, return_inverse=True)
-        row_of = row_of.ravel()
-        if not (np.array_equal(positions, positions[first_row][row_of])
-                and np.array_equal(triangles, triangles[first_row][row_of])):
-            raise AssertionError(f"ranges place a point range {o} owns differently")
-        numbered.append((row_of, positions[first_row], triangles[first_row], int(np.searchsorted(distinct, n_vertices))))
-    vertices = np.array([k for *_, k in numbered], dtype=np.int64)
-    cuts = np.array([position.shape[0] for _, position, _, _ in numbered], dtype=np.int64) - vertices
-    first = np.concatenate([[0], np.cumsum(vertices)[:-1]])
-    first_cut = int(vertices.sum()) + np.concatenate([[0], np.cumsum(cuts)[:-1]])
-    new_of_row = []  # each owner's new id of each row it received
-    for (row_of, _, _, k), f, fc in zip(numbered, first, first_cut):
-        new_of_row.append(np.where(row_of < k, f + row_of, fc + row_of - k).astype(np.int32))
+    mesh (the module's step 5): the used lattice vertices, then the used cut points, each by
+    owners.owned_ids over their mesh ids (an owner's mesh ids follow on from the previous
+    owner's, so the order is the ids').  The result's points and triangles are written from
+    every range that uses them; one two ranges place or put on a surface triangle
+    differently is an AssertionError: stuffing in ranges must agree where they meet."""
+    used = [np.flatnonzero(used_vertices(p.tets, p.ids.shape[0])) for p in parts]
+    lattice = [p.ids[u] < n_vertices for p, u in zip(parts, used)]
+    vertex_ids, n_used = owned_ids([p.ids[u[k]] for p, u, k in zip(parts, used, lattice)],
+                                   [p.owners[u[k]] for p, u, k in zip(parts, used, lattice)], n_ranges)
+    cut_ids, n_cuts = owned_ids([p.ids[u[~k]] for p, u, k in zip(parts, used, lattice)],
+                                [p.owners[u[~k]] for p, u, k in zip(parts, used, lattice)], n_ranges)
+    points = np.empty((n_used + n_cuts, 3))
+    faces = np.empty(n_used + n_cuts, dtype=np.int32)
     new_ids = []
-    for part, (rows, bounds, to, starts) in zip(parts, sent):
+    for part, triangles, u, k, v, c in zip(parts, point_faces, used, lattice, vertex_ids, cut_ids):
         new_id = np.full(part.ids.shape[0], -1, dtype=np.int32)
-        for owner, at in zip(to, starts):  # read back from the owners
-            count = int(bounds[owner + 1] - bounds[owner])
-            new_id[rows[bounds[owner]:bounds[owner + 1]]] = new_of_row[owner][at:at + count]
+        new_id[u[k]], new_id[u[~k]] = v, n_used + c
+        points[new_id[u]], faces[new_id[u]] = part.points[u], triangles[u]
         new_ids.append(new_id)
-    blocks = [(o, slice(None, k)) for o, (*_, k) in enumerate(numbered)] + \
-        [(o, slice(k, None)) for o, (*_, k) in enumerate(numbered)]  # all lattice vertices, then all cut points
-    points = np.concatenate([numbered[o][1][block] for o, block in blocks])
-    point_faces_out = np.concatenate([numbered[o][2][block] for o, block in blocks]).astype(np.int32)
-    return Compaction(points, point_faces_out, new_ids)
+    for part, triangles, u, new_id in zip(parts, point_faces, used, new_ids):
+        if not (np.array_equal(points[new_id[u]], part.points[u]) and np.array_equal(faces[new_id[u]], triangles[u])):
+            raise AssertionError("ranges place a point they share differently")
+    return Compaction(points, faces, new_ids)
 
 
 __all__ = ["Compaction", "RangeFinish", "compact_by_owners", "finish_in_ranges", "misses_by_owners",

@@ -26,6 +26,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from .owners import rows_by_owner
 from .repair import PINCH_RINGS, repair_near_pinches, stuffed_boundary, unmatched_faces
 from .topology import local_vertex_ids, nonmanifold_of_fans, touching, vertex_fans
 
@@ -136,16 +137,6 @@ def pinches_by_owners(fans: Sequence[OwnerFans]) -> np.ndarray:
     return np.sort(np.concatenate(pinched))
 
 
-def owned_numbering(held: BoundaryFaces) -> tuple[np.ndarray, np.ndarray]:
-    """The held faces in local vertex ids (F, 3), numbered by first use (local_vertex_ids),
-    and the row (B,) of held.faces.ravel() where each local vertex is first used."""
-    local, vertex_of = local_vertex_ids(held.faces)
-    first = np.empty(vertex_of.shape[0], dtype=np.int64)
-    flat = local.ravel()
-    first[flat[::-1]] = np.arange(flat.shape[0] - 1, -1, -1)  # the last write is the first use
-    return local, first
-
-
 def _rows(faces: BoundaryFaces, rows: np.ndarray) -> BoundaryFaces:
     return BoundaryFaces(*(column[rows] for column in faces))
 
@@ -160,13 +151,12 @@ def _joined(parts: Sequence[BoundaryFaces]) -> BoundaryFaces:
 
 def _send(inbox: list[list[BoundaryFaces]], to: np.ndarray, faces: BoundaryFaces) -> None:
     """Append each range's rows of faces to its inbox: to (F,) the range of each row."""
-    if to.size and to.min() == to.max():  # one range (the usual case for most faces' owners)
-        inbox[int(to[0])].append(faces)
+    groups = rows_by_owner(to, len(inbox))
+    if len(groups) == 1:  # one range (the usual case for most faces' owners): no copy
+        inbox[groups[0][0]].append(faces)
         return
-    order = np.argsort(to, kind="stable")
-    bounds = np.searchsorted(to[order], np.arange(len(inbox) + 1))
-    for r in np.flatnonzero(np.diff(bounds)):
-        inbox[r].append(_rows(faces, order[bounds[r]:bounds[r + 1]]))
+    for r, rows in groups:
+        inbox[r].append(_rows(faces, rows))
 
 
 def _unmatched(faces: np.ndarray) -> np.ndarray:
@@ -220,5 +210,5 @@ def repair_pinches_in_ranges(parts: Sequence[RangeTets], n_ranges: int, fans: Se
 
 
 __all__ = ["BoundaryFaces", "OwnerFans", "RangeTets", "boundary_by_owners", "faces_around_owned", "fans_by_owners",
-           "owned_boundary", "owned_numbering", "pinches_by_owners", "range_boundary", "repair_pinches_in_ranges",
+           "owned_boundary", "pinches_by_owners", "range_boundary", "repair_pinches_in_ranges",
            "tets_near"]

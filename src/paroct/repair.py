@@ -357,7 +357,7 @@ def stuffed_boundary(tets: np.ndarray, core: np.ndarray) -> np.ndarray:
     faces without one can be boundary faces (surface_faces), and they are matched among
     themselves (a sixth of matching every face of the tets with three vertices not core)."""
     faces, vertex_of = _local_boundary(tets, core)
-    return _global_ids(faces, vertex_of)
+    return renumbered(faces, vertex_of)
 
 
 def _local_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -368,12 +368,13 @@ def _local_boundary(tets: np.ndarray, core: np.ndarray) -> tuple[np.ndarray, np.
 
 
 @nb.njit(cache=True, parallel=True)
-def _global_ids(faces, vertex_of):
-    """faces (F, 3) in the mesh's vertex ids: vertex_of[faces], of faces' type."""
-    out = np.empty_like(faces)
-    for f in nb.prange(faces.shape[0]):
-        for k in range(3):
-            out[f, k] = vertex_of[faces[f, k]]
+def renumbered(rows, new_id):
+    """new_id[rows] for rows (N, K) of ids (faces in local ids to the mesh's, tets to new ids),
+    of rows' type, in one parallel pass."""
+    out = np.empty_like(rows)
+    for f in nb.prange(rows.shape[0]):
+        for k in range(rows.shape[1]):
+            out[f, k] = new_id[rows[f, k]]
     return out
 
 
@@ -395,9 +396,9 @@ def remove_pinches(tets: np.ndarray, core: np.ndarray,
     local_fans = vertex_fans(faces, vertex_of.shape[0])
     bad = np.flatnonzero(nonmanifold_of_fans(local_fans))
     if bad.size == 0:
-        return tets, 0, _global_ids(faces, vertex_of), surface_topology(faces, vertex_of.shape[0], fans=local_fans)
+        return tets, 0, renumbered(faces, vertex_of), surface_topology(faces, vertex_of.shape[0], fans=local_fans)
     # Back to mesh ids for the repair, the bad vertices in ascending order as before.
-    faces, bad = _global_ids(faces, vertex_of), np.sort(vertex_of[bad])
+    faces, bad = renumbered(faces, vertex_of), np.sort(vertex_of[bad])
     fans = np.zeros(core.shape[0], dtype=local_fans.dtype)
     fans[vertex_of] = local_fans
     alive = local_repair(tets, bad, core.shape[0], points=points)
