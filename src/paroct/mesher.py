@@ -575,12 +575,7 @@ def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budge
         return why
     assert report is not None  # a result comes with its report
     note = f"boundary refined to {frame.h:.4g} where {asks.why}, in {rounds} measure-and-refine round{'s' * (rounds > 1)}"
-    lost = _losses(report, surface)
-    advice, walls = "", None
-    if lost:
-        snapped = rays.snap_surface(coarse, surface.vertices)
-        crossings = {X_AXIS_DIRECTION: rays.row_crossings(coarse, snapped, framed.faces, X_AXIS_DIRECTION)}
-        advice, walls = _walls_of_loss(surface, coarse, snapped, framed.faces, crossings, report)
+    lost, advice, walls = pass_losses(surface, report, coarse, framed.faces)
     return result, lost, advice, walls, report, note
 
 
@@ -909,12 +904,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
         restore_report(report, fresh)  # the caller's report, as it came in
         return _mesh_at(surface, field, report, progress, mend=True)
     warn_bad_tets(report)
-    lost = _losses(report, surface)
-    advice, walls = "", None
-    if lost:
-        advice, walls = _walls_of_loss(surface, frame, snapped, faces, crossings, report)
-        stages.done("features")
-    return result, lost, advice, walls
+    return (result, *pass_losses(surface, report, frame, faces, snapped, crossings, stages))
 
 
 def outside_bound(report: MeshReport) -> bool:
@@ -978,6 +968,23 @@ def pass_leaves(surface: Surface, field: SizeField, report: MeshReport, stages: 
     report.leaf_levels = _leaf_levels(frame, levels)
     stages.done("octree")
     return PassLeaves(frame, snapped, faces, crossings, keys, levels, band)
+
+
+def pass_losses(surface: Surface, report: MeshReport, frame: FatFrame, faces: np.ndarray,
+                snapped: np.ndarray | None = None, crossings: dict | None = None,
+                stages: _Stages | None = None) -> tuple[str, str, ThinFeatures | None]:
+    """What a pass (report) lost (_losses, '' if nothing) and, if it lost something, the advice
+    and the walls and gaps to refine near (_walls_of_loss, measured in frame: faces (F, 3)
+    int64, snapped and the row crossings by direction if the caller has them), marking the
+    stage "features"; else ('', '', None)."""
+    lost = _losses(report, surface)
+    if not lost:
+        return "", "", None
+    snapped = rays.snap_surface(frame, surface.vertices) if snapped is None else snapped
+    advice, walls = _walls_of_loss(surface, frame, snapped, faces, {} if crossings is None else crossings, report)
+    if stages is not None:
+        stages.done("features")
+    return lost, advice, walls
 
 
 def _walls_of_loss(surface: Surface, frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, crossings: dict,

@@ -36,9 +36,9 @@ from .errors import ParoctError
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
 from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
-                     _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _losses, _mend, _pass_report,
+                     _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _mend, _pass_report,
                      _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
-                     PassOutcome, TetMesh, _walls_of_loss, halve_whole_band, outside_bound, pass_frame, report_measures,
+                     PassOutcome, TetMesh, halve_whole_band, pass_losses, outside_bound, pass_frame, report_measures,
                      report_snapshot, resolve_size, restore_report, size_floors, vertex_classes, warn_bad_tets,
                      warn_unresolved_cuts)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
@@ -1097,13 +1097,7 @@ def _pass_in_ranges(surface: Surface, field: SizeField, band: float, *, n_parts:
     else:
         result = _stuffed_in_ranges(surface, frame, band, keys, levels, key_bounds, band_pieces,
                                     np.cumsum([0] + [leaves.shape[0] for leaves, _ in octrees]), run, report, stages)
-    lost = _losses(report, surface)
-    advice, walls = "", None
-    if lost:
-        crossings = {X_AXIS_DIRECTION: rays.row_crossings(frame, snapped, faces, X_AXIS_DIRECTION)}
-        advice, walls = _walls_of_loss(surface, frame, snapped, faces, crossings, report)
-        stages.done("features")
-    return PassOutcome(result, lost, advice, walls, report, "")
+    return PassOutcome(result, *pass_losses(surface, report, frame, faces, snapped, stages=stages), report, "")
 
 
 def _stuffed_in_ranges(surface: Surface, frame: FatFrame, size: float, keys: np.ndarray, levels: np.ndarray,
