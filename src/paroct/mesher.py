@@ -325,15 +325,9 @@ def mesh(
     stops the meshing there and reaches the caller unchanged (the way to cancel a run).
     """
     t0 = time.perf_counter()
-    if size is not None and divisions is not None:
-        raise ParoctError(f"size = {size!r} and divisions = {divisions!r}: give one (size = diagonal / divisions)")
-    if not isinstance(thin_features, (bool, np.bool_)):
-        raise ParoctError(f"thin_features = {thin_features!r}: must be True or False")
-    surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
-    h = resolve_size(surface, size, divisions)
+    surface, h, floor, whole_floor, budget = checked_request(source, size, divisions, thin_features, min_size,
+                                                             max_memory)
     field = size_field(h, max_size, regions, size_function, curvature, layers, patch_sizes)
-    floor, whole_floor = size_floors(surface, h, min_size)
-    budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
     if progress is not None and not callable(progress):
         raise ParoctError(f"progress = {progress!r}: must be a function taking a stage's name, or None")
     _check_memory(surface, field, budget)
@@ -376,6 +370,32 @@ def mesh(
         return LocalOutcome(None, tried, tried_notes, why == LOCAL_MEMORY)
 
     return halve_whole_band(surface, field, floor, whole_floor, budget, thin_features, whole_pass, notes, refine_locally)
+
+
+class Request(NamedTuple):
+    """checked_request's result: the surface, the size h, the floors (size_floors) and the
+    memory budget in bytes."""
+
+    surface: Surface
+    h: float
+    floor: float
+    whole_floor: float
+    budget: float
+
+
+def checked_request(source: SurfaceSource | Surface, size: float | None, divisions: float | None,
+                    thin_features: bool, min_size: float | None, max_memory: float | None) -> Request:
+    """The options mesh() and partition.mesh_in_ranges share, checked (ParoctError naming a
+    wrong one), with the surface loaded unless a validated one is given."""
+    if size is not None and divisions is not None:
+        raise ParoctError(f"size = {size!r} and divisions = {divisions!r}: give one (size = diagonal / divisions)")
+    if not isinstance(thin_features, (bool, np.bool_)):
+        raise ParoctError(f"thin_features = {thin_features!r}: must be True or False")
+    surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
+    h = resolve_size(surface, size, divisions)
+    floor, whole_floor = size_floors(surface, h, min_size)
+    budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
+    return Request(surface, h, floor, whole_floor, budget)
 
 
 class PassOutcome(NamedTuple):

@@ -35,22 +35,21 @@ from .band import surface_prune
 from .errors import ParoctError
 from .frame import CUBE_CORNERS, EDGE_DIRECTIONS, X_AXIS_DIRECTION, FatFrame, row_basis
 from .lattice import LeafVertices, graded_tets, number_vertices
-from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, _at_boundary_size, _available_memory,
+from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, PassOutcome, TetMesh, _at_boundary_size,
                      _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _mend, _pass_report,
-                     _restrict, _spread_leaf_classes, _Stages, cut_edges, octree_around_band,
-                     PassOutcome, TetMesh, halve_whole_band, pass_losses, outside_bound, pass_frame, report_measures,
-                     report_snapshot, resolve_size, restore_report, size_floors, vertex_classes, warn_bad_tets,
-                     warn_unresolved_cuts)
+                     _restrict, _spread_leaf_classes, _Stages, checked_request, cut_edges, halve_whole_band,
+                     octree_around_band, outside_bound, pass_frame, pass_losses, report_measures, report_snapshot,
+                     restore_report, vertex_classes, warn_bad_tets, warn_unresolved_cuts)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
-from .sizing import OUTSIDE, UNDECIDED, SizeField, positive_number, size_field
+from .sizing import OUTSIDE, UNDECIDED, SizeField, size_field
 from .quality import OUTSIDE as OUTSIDE_BOUND
 from .owners import owned_ids
 from .range_finish import finish_in_ranges
 from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners, owned_boundary, repair_pinches_in_ranges
 from .stuffing import CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
-from .surface import Surface, SurfaceSource, load_surface
+from .surface import Surface, SurfaceSource
 
 #: No lattice points: (0, 3) int64, what joins of no pieces start from.
 _NO_COORDS = np.zeros((0, 3), dtype=np.int64)
@@ -1041,17 +1040,11 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
         raise ParoctError(f"n_parts = {n_parts!r}: must be a whole number of ranges, at least 1")
     if mapper is not None and not callable(mapper):
         raise ParoctError(f"mapper = {mapper!r}: must be a function like map(function, *iterables), or None")
-    if size is not None and divisions is not None:
-        raise ParoctError(f"size = {size!r} and divisions = {divisions!r}: give one (size = diagonal / divisions)")
-    if not isinstance(thin_features, (bool, np.bool_)):
-        raise ParoctError(f"thin_features = {thin_features!r}: must be True or False")
     run = map if mapper is None else mapper
     n_parts = int(n_parts)
-    surface = source if isinstance(source, Surface) and source.validated else load_surface(source)
-    h = resolve_size(surface, size, divisions)
+    surface, h, floor, whole_floor, budget = checked_request(source, size, divisions, thin_features, min_size,
+                                                             max_memory)
     field = size_field(h, max_size)
-    floor, whole_floor = size_floors(surface, h, min_size)
-    budget = _available_memory() if max_memory is None else positive_number("max_memory", max_memory, infinite=True)
     _check_memory(surface, field, budget)
     stage_seconds: dict = {}  # stage times add up over the passes
     return halve_whole_band(surface, field, floor, whole_floor, budget, bool(thin_features),
