@@ -55,6 +55,20 @@ def test_obj_quads_split_into_fans(tmp_path):
     assert _is_box(path) and read_surface_file(path)[1].shape == (12, 3)
 
 
+def test_obj_statements_continued_on_the_next_line(tmp_path):
+    # Rhino ends long face lines with a backslash; a statement may run over several lines.
+    quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    text = _obj_lines(quads, lambda i: f"{i + 1}/{i + 1}/1")
+    text = text.replace("f 1/1/1 4/4/1 ", "f 1/1/1 \\\n4/4/1 \\\n ").replace("v 1 0 0", "v 1 \\\n0 0")
+    assert text.count("\\") == 3
+    path = tmp_path / "box.obj"
+    path.write_text(text + "f 1 2 x\n")  # a bad corner after the continued lines: its own line number
+    with pytest.raises(ParoctError, match=f"line {text.count(chr(10)) + 1} reads 'f 1 2 x'"):
+        load_surface(path)
+    path.write_text(text)
+    assert _is_box(path) and read_surface_file(path)[1].shape == (12, 3)
+
+
 def _ply(fmt: str, vertex_props: list, face_list: str = "vertex_indices", faces=CUBE_F, extra=b"") -> bytes:
     """A PLY of the box: vertex properties in the given order (x, y, z among others), faces."""
     header = [f"ply\nformat {fmt} 1.0\ncomment made by hand\nelement vertex 8\n"]

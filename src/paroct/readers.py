@@ -282,9 +282,10 @@ def _read_obj(data: bytes) -> SurfaceFile:
     ``i/t``, ``i/t/n`` or ``i//n`` (the vertex index i from 1, or negative: counted back
     from the latest vertex); the groups of ``g name`` statements (of ``o name`` in a file
     with no ``g``; faces before the first are in ``default``), two or more named; every other
-    statement (normals, texture coordinates, materials, lines) ignored."""
+    statement (normals, texture coordinates, materials, lines) ignored.  A line ending in a
+    backslash goes on on the next (Rhino writes long faces so)."""
     text = _text(data)
-    lines = text.splitlines()
+    lines = _joined_continuations(text.splitlines())
     fast = _obj_triangles(lines)
     if fast is not None:
         vertices, faces = fast
@@ -299,6 +300,27 @@ def _read_obj(data: bytes) -> SurfaceFile:
 
 
 _OBJ_GROUP = re.compile(r"^[ \t]*[go](?:[ \t]|$)", re.MULTILINE)
+
+
+def _joined_continuations(lines: list) -> list:
+    """OBJ's lines with each one ending in a backslash joined to the next, which is left
+    blank so that later lines keep their numbers (a statement's errors name its first line)."""
+    if not any(line.rstrip().endswith("\\") for line in lines):
+        return lines
+    out: list[str] = []
+    start, carry = 0, None
+    for i, line in enumerate(lines):
+        if carry is None:
+            start = i
+            out.append(line)
+        else:
+            out[start] = carry + " " + line
+            out.append("")
+        statement = out[start].rstrip()
+        carry = statement[:-1] if statement.endswith("\\") else None
+    if carry is not None:  # a backslash on the last line continues nothing
+        out[start] = carry
+    return out
 
 
 def _obj_face_groups(lines: list) -> list:
