@@ -323,7 +323,7 @@ def test_gmsh_files_without_a_surface_or_damaged_are_refused(tmp_path):
     some = meshio.Mesh(BOX_V, [("triangle", SIDE_FACES[:4].reshape(-1, 3))],
                        cell_data={"gmsh:physical": [np.ones(8, dtype=int)], "gmsh:geometrical": [np.ones(8, dtype=int)]})
     meshio.write(path, some, file_format="gmsh22", binary=False)  # four sides in a physical group, two left out
-    with pytest.raises(ParoctError, match=r"open surface, \d+ boundary edges .*put every surface of the part in one"):
+    with pytest.raises(ParoctError, match=r"open surface, \d+ boundary edges.*put every surface of the part in one"):
         load_surface(path)
     path.write_bytes(b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\nxx\n")
     with pytest.raises(ParoctError, match=r"as MSH: section \$Nodes has no \$EndNodes$"):

@@ -285,7 +285,9 @@ def test_solids_overlapping_at_a_shared_edge_are_refused():
     faces around the edge do not alternate in direction, so no pairing bounds the solid."""
     prism = manifold3d.Manifold.extrude(manifold3d.CrossSection([[(1.0, 1.0), (0.0, 0.7), (1.3, 0.0)]]), 1.0)
     vertices, faces = _welded_soup(*_cubes((0, 0, 0)), prism)
-    with pytest.raises(ParoctError, match="non-manifold surface, 1 edges shared by more than two triangles"):
+    # The message names the edge, with its triangles: the cube's two and the prism's two.
+    with pytest.raises(ParoctError, match=r"non-manifold surface, 1 edges shared by more than two triangles, "
+                                          r"e\.g\. \(1, 1, 0\) - \(1, 1, 1\) in 4 triangles \(solids overlapping"):
         surface_from_arrays(vertices, faces)
 
 
@@ -336,9 +338,9 @@ def test_vertices_that_are_not_real_numbers_are_refused(vertices):
 
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("break_it,match", [
-    (_flip_one, "inconsistently oriented"),
-    (_drop_one, "open surface, 3 boundary edges"),
-    (_duplicate_one, "non-manifold surface, 3 edges"),
+    (_flip_one, r"inconsistently oriented surface, \d+ edges whose two triangles disagree, e\.g\. \("),
+    (_drop_one, r"open surface, 3 boundary edges, e\.g\. \("),
+    (_duplicate_one, r"non-manifold surface, 3 edges shared by more than two triangles, e\.g\. \(.*\) in 3 triangles"),
     (_inside_out, "negative volume"),
 ])
 def test_broken_surfaces_are_refused_as_manifold3d_refuses_them(seed, break_it, match):

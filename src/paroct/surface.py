@@ -500,17 +500,44 @@ def _to_manifold(vertices: np.ndarray, faces: np.ndarray, face_id: np.ndarray | 
     return manifold3d.Manifold(mesh)
 
 
-def _status_error(name: str, label: str, boundary: int = 0, nonmanifold: int = 0, flipped: int = 0) -> ParoctError:
-    """The error for a manifold3d status name, with edge counts where they are known."""
+def _bad_edge_example(vertices: np.ndarray, faces: np.ndarray, kind: str) -> str:
+    """', e.g. ...' naming one edge of a kind _edge_report counts ('boundary': in one
+    triangle; 'nonmanifold': in more than two; 'flipped': in two that run it the same way)
+    by its ends' coordinates, the one of smallest vertex ids; '' if there is none.  Only an
+    error's text: sorting every edge of the surface is cheap beside a user's fix."""
+    ends = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    forward = (faces < np.roll(faces, -1, axis=1)).reshape(-1)
+    edges, first, inverse, count = np.unique(ends, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    if kind == "boundary":
+        bad = count == 1
+    elif kind == "nonmanifold":
+        bad = count > 2
+    else:  # two triangles that run the edge the same way
+        bad = (count == 2) & (np.bincount(inverse.reshape(-1), weights=forward, minlength=edges.shape[0]) != 1)
+    if not bad.any():
+        return ""
+    e = int(np.argmax(bad))
+    a, b = sorted(", ".join(f"{x:.6g}" for x in vertices[v]) for v in edges[e])  # the same for any numbering
+    return f", e.g. ({a}) - ({b})" + (f" in {count[e]} triangles" if kind == "nonmanifold" else "")
+
+
+def _status_error(name: str, label: str, boundary: int = 0, nonmanifold: int = 0, flipped: int = 0,
+                  where: str = "") -> ParoctError:
+    """The error for a manifold3d status name, with edge counts where they are known and
+    ``where`` (_bad_edge_example's text for the first kind counted) after them."""
     if name == "NonFiniteVertex":
         return ParoctError(f"{label}: a vertex coordinate is NaN or infinite")
     if name == "NotManifold":
         if boundary:
-            return ParoctError(f"{label}: open surface, {boundary} boundary edges (a solid needs a closed surface)")
+            return ParoctError(f"{label}: open surface, {boundary} boundary edges{where} (a solid needs a closed "
+                               "surface)")
         if nonmanifold:
-            return ParoctError(f"{label}: non-manifold surface, {nonmanifold} edges shared by more than two triangles")
+            return ParoctError(f"{label}: non-manifold surface, {nonmanifold} edges shared by more than two "
+                               f"triangles{where} (solids overlapping or touching there, or a sheet inside or "
+                               "outside the solid: paroct meshes what a closed 2-manifold surface bounds)")
         if flipped:
-            return ParoctError(f"{label}: inconsistently oriented surface, {flipped} edges whose two triangles disagree")
+            return ParoctError(f"{label}: inconsistently oriented surface, {flipped} edges whose two triangles "
+                               f"disagree{where}")
         return ParoctError(f"{label}: non-manifold surface (sheets touching at a vertex)")
     return ParoctError(f"{label}: manifold3d rejected the surface ({name})")
 
@@ -587,7 +614,8 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
             vertices, faces = split
             boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
     if boundary or nonmanifold or flipped:
-        raise _status_error("NotManifold", label, boundary, nonmanifold, flipped)
+        where = _bad_edge_example(vertices, faces, "boundary" if boundary else "nonmanifold" if nonmanifold else "flipped")
+        raise _status_error("NotManifold", label, boundary, nonmanifold, flipped, where)
     n_shells = int(shell.max()) + 1
     if n_shells == 1:
         lo, hi, _ = bounding_box(vertices)
