@@ -27,7 +27,7 @@ def test_linear_tets_reproduce_a_linear_field_on_a_graded_mesh():
     """The patch test: with T = a . x + b on every boundary node, linear elements give T = a . x + b
     at every interior node, exactly, only on a conforming mesh of positive tets (a hanging
     node of a transition, or a flipped tet, breaks it)."""
-    result = paroct.mesh(ROOT / "data" / "bunny.stl", divisions=20)
+    result = paroct.mesh(ROOT / "data" / "bunny.stl", divisions=25)
     assert len(result.report.leaf_levels) >= 3  # graded: transition templates inside
     mesh = skfem.MeshTet(np.ascontiguousarray(result.mesh.points.T), np.ascontiguousarray(result.mesh.tets.T))
     basis = skfem.Basis(mesh, skfem.ElementTetP1())

@@ -305,10 +305,10 @@ def mesh(
     refined the same way (lfs.patch_asks).
     thin_features: when the mesh loses topology (boundary components, genus), loses or gains
     more than 1 % of the volume, or misses surface vertices by more than 2 * size (parts
-    thinner than the lattice dropped), the solid is meshed again: if it missed no surface
-    vertex, lost or gained under 4 % of the volume and the whole boundary at size / 2 is
-    estimated at fewer tets than refining near the thin places, at size / 2; else, or if that
-    still loses, with the boundary refined only near the walls and gaps thinner than 2 * size
+    thinner than the lattice dropped), the solid is meshed again: if the whole boundary at
+    size / 2 is estimated at fewer tets than refining near the thin places, at size / 2 (about
+    one element across walls as thin as it; layers asks for more); else, or if that still
+    loses, with the boundary refined only near the walls and gaps thinner than 2 * size
     and the missed parts, to two element layers across each (first at most size / 8, then
     deeper while it still loses, down to min_size, default size / 16, until rounds there
     lose the same: SAME_LOSS_ROUNDS), every tet measured,
@@ -351,15 +351,13 @@ def mesh(
 
     def refine_locally(report: MeshReport, lost: str, walls: ThinFeatures) -> LocalOutcome:
         # The whole band at h / 2, h / 4, ... as memory allows, for _thin_locally to try
-        # where one is estimated at fewer tets than its next round; h / 2 only where
-        # halving can mend what the pass lost (HALVING_GAIN).  Not at whole_floor: should
-        # everything lose, the pass there is the one returned, as before session 34.
+        # where one is estimated at fewer tets than its next round (h / 2 before the first).
+        # Not at whole_floor: should everything lose, the pass there is the one returned, as
+        # before session 34.
         wholes, whole = [], h / 2
         while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
             wholes.append(whole)
             whole /= 2
-        if _missed(report) or abs(report.volume_error) >= VOLUME_LOSS_WARNING * HALVING_GAIN:
-            wholes = [s for s in wholes if s != h / 2]
         local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes, progress,
                                                        stage_seconds, asks)
         if local is not None:
@@ -634,7 +632,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
     Before a round, the coarsest not yet tried is meshed over the whole band when
     estimate_tets puts it below the round's _local_tets (before the first round, only
-    size / 2: HALVING_GAIN), once each; the rounds go on where it loses.  The rounds' local
+    size / 2), once each; the rounds go on where it loses.  The rounds' local
     volume error is what the thin places lose, and stuffing's error elsewhere (second order in
     size, a chord's) none of them mends: a sphere of 0.5 M triangles united with a cube lost
     1.5-1.7 % at diag/20 in four rounds to size / 16, 1.0 s, and the whole band at size / 2
@@ -661,6 +659,21 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             return None, f"a frame of {frame.levels} levels is too deep", tried, tried_notes
         assert wanted is not None  # _local_ask asks a band unless one of the two above
         local = _local_tets(surface, field, wanted)
+        # Before any round near thin places, the whole band is halved (size / 2) when that is
+        # estimated at fewer tets than the first round, whatever the pass at size lost. Both
+        # estimates are upper bounds, _local_tets 3.4-7.2 x the tets of a first round on the corpus'
+        # thin parts at diag/40, estimate_tets 1.5-1.9 x the whole band's, so halving is chosen
+        # while it makes up to about twice a round's tets: it needs no second round and keeps the
+        # band on one level. Where the pass lost stuffing's own chord error on a bumpy surface,
+        # which no round mends, halving keeps it (armadillo at diag/40: three rounds made 0.49 M
+        # tets in 0.81 s; the whole band at size / 2 0.10 M in 0.19 s). Where it lost walls about as
+        # thick as the lattice, or dropped a part thinner, halving often keeps them too, with far
+        # fewer tets than two layers across every wall: tray_bottom at diag/80 0.18 M against 1.24 M
+        # tets, a 1 mm stepped shim at diag/40 73 k against 0.99 M (session 49; until then halving
+        # was skipped where the pass missed surface vertices or lost 4 % of the volume or more). If
+        # the halved band still loses, the rounds start from size, as without it (from size / 2 they
+        # would go a level deeper: fea_part at diag/60, 6.1 M tets against 2.5 M), having spent one
+        # pass cheaper than the round.
         if wholes and (step > 0 or wholes[0] == field.size / 2):
             whole = estimate_tets(surface, _at_boundary_size(field, wholes[0]))
             if whole < local:
@@ -788,21 +801,6 @@ def _next_ask(needs: np.ndarray, depth: np.ndarray, cap: int, extra: int, max_de
     return (cap + 1, extra + 1) if cap < max_depth else None
 
 
-#: Before any round near thin places, the whole band is halved (size / 2) when the pass at size
-#: missed no surface vertex, lost or gained less than HALVING_GAIN x VOLUME_LOSS_WARNING of the
-#: volume, and is estimated at fewer tets than the first round.  Stuffing's volume error is
-#: second order in size (a chord's), so halving divides it by about 4 (4.2-6.8 measured on the
-#: corpus where no wall is lost).  What such a pass loses are walls about as thick as the
-#: lattice and, on bumpy surfaces, that error itself, which no round near thin places mends:
-#: armadillo at diag/40 took three rounds, 0.49 M tets in 0.81 s; the whole band at size / 2
-#: keeps it with 0.10 M tets in 0.19 s.  A dropped part (missed vertices) needs the levels only
-#: rounds afford.  Both estimates are upper bounds, _local_tets 3.4-7.2 x the tets of a first
-#: round on the corpus' thin parts at diag/40, estimate_tets 1.5-1.9 x the whole band's, so
-#: halving is chosen while it makes up to about twice a round's tets: it needs no second round
-#: and keeps the band on one level.  If the halved band still loses, the rounds start from size,
-#: as without it (from size / 2 they would go a level deeper: fea_part at diag/60, 6.1 M tets
-#: against 2.5 M).
-HALVING_GAIN = 4
 #: Rounds near thin places stop when the samples at min_size can go no deeper and this many
 #: rounds in a row, each one level deeper for the samples above it, lost the same as the one
 #: before (the same components, genus and volume lost): a random plate at diag/80 lost the
