@@ -280,15 +280,43 @@ def test_a_manifold_whose_touching_edges_have_flat_faces_keeps_its_own_vertices(
     assert surface.volume == pytest.approx(sponge.volume(), rel=1e-12) == (20 / 27) ** 3
 
 
-def test_solids_overlapping_at_a_shared_edge_are_refused():
+def test_solids_overlapping_at_a_shared_edge_are_united():
     """A cube and a prism sharing an edge, each reaching into the other's wedge there: the
-    faces around the edge do not alternate in direction, so no pairing bounds the solid."""
+    faces around the edge do not alternate in direction, so no order about it pairs them; paired
+    in any order, cube and prism come apart into closed shells, and the solid is their union
+    (until session 49 the surface was refused)."""
     prism = manifold3d.Manifold.extrude(manifold3d.CrossSection([[(1.0, 1.0), (0.0, 0.7), (1.3, 0.0)]]), 1.0)
-    vertices, faces = _welded_soup(*_cubes((0, 0, 0)), prism)
-    # The message names the edge, with its triangles: the cube's two and the prism's two.
-    with pytest.raises(ParoctError, match=r"non-manifold surface, 1 edges shared by more than two triangles, "
-                                          r"e\.g\. \(1, 1, 0\) - \(1, 1, 1\) in 4 triangles \(solids overlapping"):
-        surface_from_arrays(vertices, faces)
+    cube = _cubes((0, 0, 0))[0]
+    surface = surface_from_arrays(*_welded_soup(cube, prism))
+    union = cube + prism
+    assert surface.volume == pytest.approx(union.volume(), rel=1e-12) and surface.volume < cube.volume() + prism.volume()
+    assert (surface.components, surface.genus) == (1, 0)
+
+
+@pytest.mark.parametrize("case", ["bridge of four boxes", "two boxes face to face", "tetrahedron in a cube's corner"])
+def test_solids_touching_over_an_area_with_shared_vertices_are_united(case):
+    """Boxes stacked face to face (a slicer's test bridge), exported as one soup: welding joins
+    their coincident corners into edges of four faces, two of them coplanar, where no order
+    about the edge pairs them.  The solid is the union, as manifold3d makes it from the boxes,
+    and the mesh keeps its volume and genus."""
+    if case == "bridge of four boxes":
+        boxes = [manifold3d.Manifold.cube([40.0, 10.0, 2.0]), manifold3d.Manifold.cube([10.0, 10.0, 15.0]).translate([0, 0, 2]),
+                 manifold3d.Manifold.cube([10.0, 10.0, 15.0]).translate([30, 0, 2]),
+                 manifold3d.Manifold.cube([40.0, 10.0, 3.0]).translate([0, 0, 17])]
+    elif case == "two boxes face to face":
+        boxes = _cubes((0, 0, 0), (1, 0, 0))
+    else:
+        boxes = [_cubes((0, 0, 0))[0], manifold3d.Manifold.hull_points([[0.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]])]
+    vertices, faces = _welded_soup(*boxes)
+    welded_vertices, welded_faces, _ = _weld(vertices, faces)
+    assert _shell_topology(welded_faces, welded_vertices.shape[0])[1] > 0  # edges in more than two faces
+    union = manifold3d.Manifold.batch_boolean(boxes, manifold3d.OpType.Add)
+    surface = surface_from_arrays(vertices, faces)
+    assert surface.volume == pytest.approx(union.volume(), rel=1e-12)
+    assert (surface.components, surface.genus) == (1, union.genus())
+    result = mesh(surface, divisions=20)
+    assert (result.report.boundary_components, result.report.boundary_genus) == (1, union.genus())
+    assert abs(result.report.volume_error) < 0.01
 
 
 def test_a_manifold_with_vertex_properties_loads_as_its_positions():

@@ -392,7 +392,8 @@ def _volume_area(vertices, faces, scale):
     return volume / 6.0 / scale / scale / scale, area / 2.0 / scale / scale
 
 
-def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray,
+                           any_order: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """The surface with sheets that touch along edges taken apart, or None if some edge
     cannot be: (vertices (V', 3) float64, faces (F, 3) int32, the same triangles).
 
@@ -407,17 +408,25 @@ def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.
     manifold3d keeps them.  None if an edge has an odd count, two neighbours run it the same
     way (solids that overlap there), or a face around it is flat (its third vertex on the
     edge's line, where no angle orders it).
+
+    any_order: at such an edge, pair the k-th face running it one way with the k-th running it
+    the other (None only where the two counts differ).  Solids that overlap, or touch over an
+    area with shared vertices (boxes stacked face to face, panels side by side), come apart
+    into closed shells that may cross or touch there; the triangles are the same, and so is
+    every point's winding number, so the union of the shells (surface_from_arrays) is the
+    solid the surface bounds.
     """
     new_vertices, new_faces, ok = _pair_and_split(np.ascontiguousarray(vertices, dtype=np.float64),
-                                                  np.ascontiguousarray(faces, dtype=np.int32))
+                                                  np.ascontiguousarray(faces, dtype=np.int32), any_order)
     return (new_vertices, new_faces) if ok else None
 
 
 @nb.njit(cache=True)
-def _pair_and_split(vertices, faces):
+def _pair_and_split(vertices, faces, any_order):
     """_split_touching_sheets' kernel: half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k + 1) % 3]
     and starts at corner h; twins are paired by edge, then corners joined through twins
-    (union-find) become the new vertices, numbered in order of first corner."""
+    (union-find) become the new vertices, numbered in order of first corner.  any_order:
+    where no order around an edge pairs its faces, pair them in half-edge order instead."""
     nf = faces.shape[0]
     nv = np.int64(vertices.shape[0])
     keys = np.empty(3 * nf, dtype=np.int64)
@@ -433,40 +442,12 @@ def _pair_and_split(vertices, faces):
         j = i + 1
         while j < 3 * nf and keys[order[j]] == keys[order[i]]:
             j += 1
-        n = j - i
-        if n % 2:
+        if (j - i) % 2:
             return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
-        if n == 2:
-            twin[order[i]], twin[order[i + 1]] = order[i + 1], order[i]
-        else:
-            lo, hi = keys[order[i]] // nv, keys[order[i]] % nv
-            d = vertices[hi] - vertices[lo]
-            d = d / np.sqrt(np.sum(d * d))
-            e1 = np.zeros(3)
-            e2 = np.zeros(3)
-            for s in range(i, j):
-                h = order[s]
-                w = vertices[faces[h // 3, (h % 3 + 2) % 3]] - vertices[lo]
-                w = w - np.sum(w * d) * d
-                length = np.sqrt(np.sum(w * w))
-                if not length > 0:
-                    return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
-                if s == i:  # the first face's direction is angle 0
-                    e1 = w / length
-                    e2 = np.array([d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
-                                   d[0] * e1[1] - d[1] * e1[0]])
-                angle[h] = np.arctan2(np.sum(w * e2), np.sum(w * e1))
-            around = order[i:j][np.argsort(angle[order[i:j]], kind="mergesort")]
-            # A face running the edge hi -> lo has the solid just counter-clockwise of it (about
-            # lo -> hi), one running lo -> hi just clockwise: they must alternate.
-            down = faces[around[0] // 3, around[0] % 3] == hi
-            first = 0 if down else 1
-            for s in range(n):
-                if (faces[around[s] // 3, around[s] % 3] == hi) != (down == (s % 2 == 0)):
-                    return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
-            for s in range(first, n, 2):
-                a, b = around[s], around[(s + 1) % n]
-                twin[a], twin[b] = b, a
+        hi = keys[order[i]] % nv
+        if not (_pair_by_angle(vertices, faces, order[i:j], keys[order[i]] // nv, hi, angle, twin)
+                or any_order and _pair_in_order(faces, order[i:j], hi, twin)):
+            return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
         i = j
     parent = np.arange(3 * nf)
     for h in range(3 * nf):
@@ -489,6 +470,69 @@ def _pair_and_split(vertices, faces):
             m += 1
         new_faces[c // 3, c % 3] = new_id[r]
     return new_vertices[:m], new_faces, True
+
+
+@nb.njit(cache=True)
+def _pair_by_angle(vertices, faces, around, lo, hi, angle, twin):
+    """Pair the half-edges ``around`` (all on edge {lo, hi}) as twins, each face with the next
+    about the edge on the solid's side (two faces: with each other); False, pairing nothing,
+    if two faces run the edge the same way where they should alternate, or one is flat (its
+    third vertex on the edge's line, where no angle orders it)."""
+    n = around.shape[0]
+    if n == 2:
+        if (faces[around[0] // 3, around[0] % 3] == hi) == (faces[around[1] // 3, around[1] % 3] == hi):
+            return False
+        twin[around[0]], twin[around[1]] = around[1], around[0]
+        return True
+    d = vertices[hi] - vertices[lo]
+    d = d / np.sqrt(np.sum(d * d))
+    e1 = np.zeros(3)
+    e2 = np.zeros(3)
+    for s in range(n):
+        h = around[s]
+        w = vertices[faces[h // 3, (h % 3 + 2) % 3]] - vertices[lo]
+        w = w - np.sum(w * d) * d
+        length = np.sqrt(np.sum(w * w))
+        if not length > 0:
+            return False
+        if s == 0:  # the first face's direction is angle 0
+            e1 = w / length
+            e2 = np.array([d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
+                           d[0] * e1[1] - d[1] * e1[0]])
+        angle[h] = np.arctan2(np.sum(w * e2), np.sum(w * e1))
+    around = around[np.argsort(angle[around], kind="mergesort")]
+    # A face running the edge hi -> lo has the solid just counter-clockwise of it (about
+    # lo -> hi), one running lo -> hi just clockwise: they must alternate.
+    down = faces[around[0] // 3, around[0] % 3] == hi
+    for s in range(n):
+        if (faces[around[s] // 3, around[s] % 3] == hi) != (down == (s % 2 == 0)):
+            return False
+    for s in range(0 if down else 1, n, 2):
+        a, b = around[s], around[(s + 1) % n]
+        twin[a], twin[b] = b, a
+    return True
+
+
+@nb.njit(cache=True)
+def _pair_in_order(faces, around, hi, twin):
+    """Pair the half-edges ``around`` of one edge in their order, the k-th running it one way
+    with the k-th running it the other; False, pairing nothing, if the two counts differ."""
+    n = around.shape[0]
+    down = np.empty(n, dtype=np.int64)
+    up = np.empty(n, dtype=np.int64)
+    n_down = n_up = 0
+    for s in range(n):
+        if faces[around[s] // 3, around[s] % 3] == hi:
+            down[n_down] = around[s]
+            n_down += 1
+        else:
+            up[n_up] = around[s]
+            n_up += 1
+    if n_down != n_up:
+        return False
+    for k in range(n_down):
+        twin[down[k]], twin[up[k]] = up[k], down[k]
+    return True
 
 
 def _to_manifold(vertices: np.ndarray, faces: np.ndarray, face_id: np.ndarray | None = None) -> manifold3d.Manifold:
@@ -613,6 +657,12 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         if split is not None:
             vertices, faces = split
             boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
+    if nonmanifold and not boundary:  # overlapping, or touching over an area: their union
+        shells = _split_touching_sheets(vertices, faces, any_order=True)
+        if shells is not None:
+            topology = _shell_topology(shells[1], shells[0].shape[0])
+            if not any(topology[:3]):
+                (vertices, faces), (boundary, nonmanifold, flipped, fans, shell) = shells, topology
     if boundary or nonmanifold or flipped:
         where = _bad_edge_example(vertices, faces, "boundary" if boundary else "nonmanifold" if nonmanifold else "flipped")
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped, where)
