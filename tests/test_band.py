@@ -350,19 +350,55 @@ def test_a_round_that_still_loses_is_followed_by_the_whole_band_where_that_is_ch
     assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
 
 
+def _hollow_box():
+    """A closed box with walls 0.04 thick: at size 0.1 a fifth of its volume is lost."""
+    return manifold3d.Manifold.cube([1.0, 1.0, 0.5]) - manifold3d.Manifold.cube([0.8, 0.8, 0.42]).translate([0.1, 0.1, 0.04])
+
+
 def test_a_pass_whose_halved_band_still_loses_goes_to_rounds_near_thin_places(monkeypatch):
-    """A closed box with walls 0.04 thick loses a fifth of its volume at 0.1, and a tenth at
-    0.05, where halving is tried first (cheaper than a round): the walls are then refined near
-    their faces from 0.1, into the very mesh made when halving is not tried."""
-    box = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) - manifold3d.Manifold.cube([0.8, 0.8, 0.42]).translate([0.1, 0.1, 0.04])
-    result = mesh(box, size=0.1)
+    """The hollow box loses a fifth of its volume at 0.1, and a tenth at 0.05, where halving
+    is tried first (cheaper than a round): with size / 4 not tried, the walls are then refined
+    near their faces from 0.1, into the very mesh made when halving is not tried."""
+    monkeypatch.setattr(mesher, "QUARTER_BAND_SHARE", 0.0)
+    result = mesh(_hollow_box(), size=0.1)
     rep = result.report
     assert "lost 21" in rep.notes[0] and "misses" not in rep.notes[0]
     assert "boundary refined to 0.05 everywhere" in rep.notes[1] and "at 0.05 the mesh lost 10" in rep.notes[1]
     assert "only near" in rep.notes[2] and abs(rep.volume_error) < 0.01 and not rep.warnings
     monkeypatch.setattr(mesher, "_fits", lambda *args: False)
-    rounds = mesh(box, size=0.1)
+    rounds = mesh(_hollow_box(), size=0.1)
     assert np.array_equal(rounds.mesh.points, result.mesh.points) and np.array_equal(rounds.mesh.tets, result.mesh.tets)
+
+
+def test_where_the_halved_band_loses_a_quarter_of_the_size_is_tried_when_far_cheaper_than_a_round(monkeypatch):
+    """The hollow box at 0.1: the whole band at 0.05 loses a tenth of the volume; at 0.025 it
+    is estimated at under a third of a round near the walls, and keeps the solid: the mesh
+    asked at 0.025, with a fraction of the round's tets."""
+    surface = load_surface(_hollow_box())
+    result = mesh(surface, size=0.1)
+    rep = result.report
+    assert rep.size == pytest.approx(0.025) and not rep.warnings
+    assert rep.notes[-1].startswith("boundary refined to 0.025 everywhere: the whole band at size / 4 is estimated at")
+    assert "under a third of the" in rep.notes[-1] and "at 0.05 the mesh lost 10" in rep.notes[-2]
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert abs(rep.volume_error) < 0.01
+    assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
+    asked = mesh(surface, size=0.025, max_size=rep.max_size, thin_features=False).mesh
+    assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
+    monkeypatch.setattr(mesher, "QUARTER_BAND_SHARE", 0.0)
+    rounds = mesh(surface, size=0.1).report
+    assert any("only near" in note for note in rounds.notes) and rep.n_tets < 0.5 * rounds.n_tets
+
+
+def test_a_quarter_of_the_size_is_not_tried_across_walls_thinner_than_an_eighth():
+    """Walls 0.011 thick at size 0.1: the whole band at 0.05 loses everything, and one at
+    0.025 would lose walls under half its size, so the rounds refine near them at once."""
+    box = manifold3d.Manifold.cube([1.0, 1.0, 0.5]) - manifold3d.Manifold.cube([0.978, 0.978, 0.478]).translate([0.011] * 3)
+    rep = mesh(box, size=0.1).report
+    assert "at 0.05 the mesh lost 100" in rep.notes[1] and "only near" in rep.notes[2] and len(rep.notes) == 3
+    assert rep.size == pytest.approx(0.0125) and not rep.warnings
 
 
 def test_without_other_warps_the_rounds_refine_until_the_bound_holds(monkeypatch):

@@ -631,8 +631,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     field.size) that every round and whole-band pass keeps.
     wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
     Before a round, the coarsest not yet tried is meshed over the whole band when
-    estimate_tets puts it below the round's _local_tets (before the first round, only
-    size / 2), once each; the rounds go on where it loses.  The rounds' local
+    estimate_tets puts it below the round's _local_tets (before the first round size / 2,
+    then size / 4 below QUARTER_BAND_SHARE of it), once each; the rounds go on where it loses.  The rounds' local
     volume error is what the thin places lose, and stuffing's error elsewhere (second order in
     size, a chord's) none of them mends: a sphere of 0.5 M triangles united with a cube lost
     1.5-1.7 % at diag/20 in four rounds to size / 16, 1.0 s, and the whole band at size / 2
@@ -651,6 +651,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     framed, tried_band, lost_at_floor, same_at_floor = None, None, None, 0
     cap, extra = min(max_depth, WHOLE_BAND_DEPTH), 0
     needs = _thin_asks(coarse, walls, max_depth, 0)[1]  # the levels each sample's two layers need
+    thinnest = float(np.min(walls.thickness, initial=np.inf, where=walls.thickness > 0))  # 0: not measured
     for step in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
         frame, depth, wanted = _local_ask(coarse, walls, cap, extra, base)
         if depth.size == 0:
@@ -674,24 +675,31 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
         # the halved band still loses, the rounds start from size, as without it (from size / 2 they
         # would go a level deeper: fea_part at diag/60, 6.1 M tets against 2.5 M), having spent one
         # pass cheaper than the round.
-        if wholes and (step > 0 or wholes[0] == field.size / 2):
+        # Before the first round, size / 4 too where size / 2 lost, when estimated at under a
+        # third of the round (QUARTER_BAND_SHARE); before later rounds, the coarsest left.
+        while wholes and (step > 0 or wholes[0] in (field.size / 2, field.size / 4)):
+            first_quarter = step == 0 and wholes[0] == field.size / 4
             whole = estimate_tets(surface, _at_boundary_size(field, wholes[0]))
-            if whole < local:
-                size = wholes.pop(0)
-                why = (f"the whole band at size / {field.size / size:g} is estimated at {whole} tets, fewer than the "
-                       f"{local} of a round near them")
-                whole_report = _pass_report(surface, field, size, stage_seconds)
-                kept, still, _, _, whole_report, note = _whole_pass(surface, field, size, base, budget, whole_report,
-                                                                    progress, stage_seconds)
-                if not still:
-                    whole_report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}",
-                                          *([note] if note else [])]
-                    return kept, "", tried, []
-                tried.append(size)
-                note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
-                        f"refining near thin places from {field.size:.4g} instead")
-                notes.append(note)
-                tried_notes.append(note)
+            if whole >= (local * QUARTER_BAND_SHARE if first_quarter else local) or (
+                    first_quarter and thinnest < field.size / 8):
+                break
+            size = wholes.pop(0)
+            why = (f"the whole band at size / {field.size / size:g} is estimated at {whole} tets, "
+                   f"{'under a third of' if first_quarter else 'fewer than'} the {local} of a round near them")
+            whole_report = _pass_report(surface, field, size, stage_seconds)
+            kept, still, _, _, whole_report, note = _whole_pass(surface, field, size, base, budget, whole_report,
+                                                                progress, stage_seconds)
+            if not still:
+                whole_report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}",
+                                      *([note] if note else [])]
+                return kept, "", tried, []
+            tried.append(size)
+            note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
+                    f"refining near thin places from {field.size:.4g} instead")
+            notes.append(note)
+            tried_notes.append(note)
+            if step > 0:
+                break
         if not _local_fits(surface, field, wanted, frame, budget):
             return None, LOCAL_MEMORY, tried, tried_notes
         if framed is None or framed.frame.levels != frame.levels:  # same origin: same levels, same frame
@@ -801,6 +809,17 @@ def _next_ask(needs: np.ndarray, depth: np.ndarray, cap: int, extra: int, max_de
     return (cap + 1, extra + 1) if cap < max_depth else None
 
 
+#: Before the first round near thin places, where the whole band at size / 2 lost, the whole
+#: band at size / 4 is tried when estimated at under this share of the round's tets and no
+#: wall or gap measured is thinner than size / 8.  _local_tets overestimates a round's tets
+#: 3.4-7.2 x and estimate_tets a whole band's 1.5-1.9 x, so a third means the band is expected
+#: to make no more tets than the round.  A part about as thin as size / 4 all over is then
+#: meshed whole instead of near all of it (tray_bottom at diag/40: 177 k tets against 1.24 M;
+#: round_rod at diag/80: 0.63 M against 4.05 M; a bent 1.2 mm sheet bracket at diag/40: 88 k
+#: against 0.61 M).  Estimated at 0.37-0.85 of the round, it made up to twice the round's tets
+#: (fea_part at diag/80: 5.28 M against 2.66 M); with a wall or gap under size / 8 it lost in 9
+#: of the 11 passes of the corpus and unseen files (session 49), each a pass spent for nothing.
+QUARTER_BAND_SHARE = 1 / 3
 #: Rounds near thin places stop when the samples at min_size can go no deeper and this many
 #: rounds in a row, each one level deeper for the samples above it, lost the same as the one
 #: before (the same components, genus and volume lost): a random plate at diag/80 lost the
