@@ -119,7 +119,9 @@ def run_mesher(name: str, path: Path, size: float) -> tuple[np.ndarray, np.ndarr
 
 def warm_up_paroct() -> None:
     """Mesh small parts on every path of paroct once: graded, uniform, pinch repair (angle_block
-    at diag/35, then moved onto its sharp edges), a thin plate that takes the thin-feature path, and a slanted rod, whose box
+    at diag/35, then moved onto its sharp edges), a thin plate that takes the thin-feature path,
+    a block with a thin fin whose rounds near it change the band's level and mend warps (the
+    halving tried first keeps bunny and the plate off that path), and a slanted rod, whose box
     is so empty that its vertices are numbered through a brick directory (without it,
     fea_part's first call loaded those kernels inside the timed call).  Run in a process of its
     own before all children, it fills the numba cache (a fresh checkout has none, and a
@@ -134,6 +136,8 @@ def warm_up_paroct() -> None:
     paroct.mesh(ROOT / "data" / "angle_block.stl", divisions=35).with_sharp_edges()
     paroct.mesh(ROOT / "data" / "bunny.stl", size=0.025, max_size=0.025)
     paroct.mesh(manifold3d.Manifold.cube([1, 1, 0.04]), size=0.2)
+    fin = manifold3d.Manifold.cube([0.8, 0.02, 0.3]).translate([0.1, 0.49, 0.5])
+    paroct.mesh(manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + fin, size=0.1)
     paroct.mesh(manifold3d.Manifold.cylinder(1.0, 0.05, 0.05, 16).rotate([0, 54.7356, 45]), size=0.02,
                 thin_features=False)
 
