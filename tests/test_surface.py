@@ -319,6 +319,22 @@ def test_solids_touching_over_an_area_with_shared_vertices_are_united(case):
     assert abs(result.report.volume_error) < 0.01
 
 
+@pytest.mark.parametrize("seed", range(12))
+def test_random_boxes_on_a_grid_saved_as_one_surface_load_as_their_union(seed):
+    """2-4 boxes with corners on a coarse grid, overlapping, touching over faces, along edges
+    or apart, their triangles welded into one soup: whatever way the faces around an edge
+    pair up, the solid is manifold3d's union of the boxes."""
+    rng = np.random.default_rng(1000 + seed)
+    boxes = []
+    for _ in range(rng.integers(2, 5)):
+        lo = rng.integers(0, 3, 3).astype(float)
+        boxes.append(manifold3d.Manifold.cube(rng.integers(1, 3, 3).astype(float).tolist()).translate(lo.tolist()))
+    union = manifold3d.Manifold.batch_boolean(boxes, manifold3d.OpType.Add)
+    surface = surface_from_arrays(*_welded_soup(*boxes))
+    assert surface.volume == pytest.approx(union.volume(), rel=1e-12)
+    assert surface.components == len(union.decompose())
+
+
 def test_a_manifold_with_vertex_properties_loads_as_its_positions():
     """Normals split a cube's vertices at its sharp edges; the mesh's merge vectors join them."""
     cube = manifold3d.Manifold.cube([1.0, 2.0, 3.0]).calculate_normals(0, 60)
