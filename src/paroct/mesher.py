@@ -367,7 +367,14 @@ def mesh(
             tried_notes = [*tried_notes, f"refining the band only near thin places: {why}; refining the whole band instead"]
         return LocalOutcome(None, tried, tried_notes, why == LOCAL_MEMORY)
 
-    return halve_whole_band(surface, field, floor, whole_floor, budget, thin_features, whole_pass, notes, refine_locally)
+    return with_repairs(surface, halve_whole_band(surface, field, floor, whole_floor, budget, thin_features, whole_pass,
+                                                  notes, refine_locally))
+
+
+def with_repairs(surface: Surface, result: MeshResult) -> MeshResult:
+    """result, its report's warnings led by what loading mended in the surface (Surface.repairs)."""
+    result.report.warnings[:0] = surface.repairs
+    return result
 
 
 class Request(NamedTuple):

@@ -39,7 +39,7 @@ from .mesher import (BandStuffing, FinestBand, MeshReport, MeshResult, PassOutco
                      _cells_around, _check_memory, _check_winding, _core, _finish, _leaf_levels, _mend, _pass_report,
                      _restrict, _spread_leaf_classes, _Stages, checked_request, cut_edges, halve_whole_band,
                      octree_around_band, outside_bound, pass_frame, pass_losses, report_measures, report_snapshot,
-                     restore_report, vertex_classes, warn_bad_tets, warn_unresolved_cuts)
+                     restore_report, vertex_classes, warn_bad_tets, warn_unresolved_cuts, with_repairs)
 from .octant import (MAX_LEVEL, is_ascending, morton_coords, morton_key, morton_keys, octant_last_key,
                      sorted_lookup)
 from .octree import _largest_fitting, octant_lattice_anchors, surface_cells, unique_level_keys
@@ -1047,9 +1047,9 @@ def mesh_in_ranges(source: SurfaceSource | Surface, size: float | None = None, *
     field = size_field(h, max_size)
     _check_memory(surface, field, budget)
     stage_seconds: dict = {}  # stage times add up over the passes
-    return halve_whole_band(surface, field, floor, whole_floor, budget, bool(thin_features),
-                            partial(_pass_in_ranges, surface, field, n_parts=n_parts, run=run,
-                                    stage_seconds=stage_seconds), [])
+    return with_repairs(surface, halve_whole_band(surface, field, floor, whole_floor, budget, bool(thin_features),
+                                                  partial(_pass_in_ranges, surface, field, n_parts=n_parts, run=run,
+                                                          stage_seconds=stage_seconds), []))
 
 
 def _pass_in_ranges(surface: Surface, field: SizeField, band: float, *, n_parts: int, run: Callable[..., Iterable],

@@ -36,7 +36,8 @@ class Surface:
     boundary (sum over components).  components: number of boundary shells.
     face_groups: (F,) int32, the named group 0 .. G - 1 of each triangle (the solids of an
     ASCII STL, the groups of an OBJ: readers.SurfaceFile), or None; group_names: the G
-    names.  bbox_min, bbox_max: (3,) float64 corners of the vertices' bounding box (derived).
+    names.  repairs: what surface_from_arrays mended (one shell's triangles turned).
+    bbox_min, bbox_max: (3,) float64 corners of the vertices' bounding box (derived).
     """
 
     vertices: np.ndarray
@@ -47,6 +48,8 @@ class Surface:
     components: int
     face_groups: np.ndarray | None = field(default=None, repr=False, compare=False)
     group_names: tuple[str, ...] = field(default=(), compare=False)
+    #: What loading mended in the input (triangles turned to face out), for the mesh's warnings.
+    repairs: tuple[str, ...] = field(default=(), compare=False)
     bbox_min: np.ndarray = field(init=False, repr=False, compare=False)
     bbox_max: np.ndarray = field(init=False, repr=False, compare=False)
     #: Set by load_surface on the surfaces it built; one made by hand is validated when meshed.
@@ -535,6 +538,69 @@ def _pair_in_order(faces, around, hi, twin):
     return True
 
 
+def _turned_note(turned: np.ndarray, disagreed: int, label: str) -> tuple[str, ...]:
+    """Surface.repairs for one shell whose faces the mask turned (F,) says were turned: () if none."""
+    n = int(np.count_nonzero(turned))
+    if n == 0:
+        return ()
+    if n == turned.shape[0]:
+        return (f"{label}: the surface was inside out (its triangles faced in): all {n} turned",)
+    return (f"{label}: {disagreed} edges whose two triangles disagreed: {n} of its {turned.shape[0]} triangles "
+            "turned to face out with the rest",)
+
+
+def _oriented_shell(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The faces (F, 3) of a closed surface (every edge in exactly two) with some turned so
+    that each edge's two run it opposite ways, the first face as it is, and the mask (F,) of
+    those turned; None if they are not one shell (joined through edges) or no turning agrees
+    (a non-orientable surface)."""
+    oriented, turned, ok = _orient_faces(np.ascontiguousarray(faces))
+    return (oriented, turned) if ok else None
+
+
+@nb.njit(cache=True)
+def _orient_faces(faces):
+    """_oriented_shell's kernel: half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k + 1) % 3];
+    the two of each edge are twins; a search from face 0 turns each face reached so that it
+    runs its edge with the face it came from the other way."""
+    nf = faces.shape[0]
+    nv = np.int64(faces.max()) + 1
+    keys = np.empty(3 * nf, dtype=np.int64)
+    for f in range(nf):
+        for k in range(3):
+            p, q = np.int64(faces[f, k]), np.int64(faces[f, (k + 1) % 3])
+            keys[3 * f + k] = min(p, q) * nv + max(p, q)
+    order = np.argsort(keys, kind="mergesort")
+    twin = np.empty(3 * nf, dtype=np.int64)
+    for i in range(0, 3 * nf, 2):  # every edge in exactly two faces: sorted keys come in pairs
+        twin[order[i]], twin[order[i + 1]] = order[i + 1], order[i]
+    turned = np.zeros(nf, dtype=np.bool_)
+    seen = np.zeros(nf, dtype=np.bool_)
+    stack = np.empty(nf, dtype=np.int64)
+    stack[0], seen[0], top, reached = 0, True, 1, 1
+    while top > 0:
+        top -= 1
+        f = stack[top]
+        for k in range(3):
+            h = 3 * f + k
+            t = twin[h]
+            g = t // 3
+            same = (faces[f, k] < faces[f, (k + 1) % 3]) == (faces[g, t % 3] < faces[g, (t % 3 + 1) % 3])
+            want = turned[f] != same  # g turned iff f is and the two run the edge opposite ways, or the other case
+            if not seen[g]:
+                seen[g], turned[g] = True, want
+                stack[top] = g
+                top += 1
+                reached += 1
+            elif turned[g] != want:
+                return faces, turned, False
+    out = faces.copy()
+    for f in range(nf):
+        if turned[f]:
+            out[f, 1], out[f, 2] = faces[f, 2], faces[f, 1]
+    return out, turned, reached == nf
+
+
 def _to_manifold(vertices: np.ndarray, faces: np.ndarray, face_id: np.ndarray | None = None) -> manifold3d.Manifold:
     mesh = manifold3d.Mesh64(
         vert_properties=np.ascontiguousarray(vertices, dtype=np.float64),
@@ -663,6 +729,12 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
             topology = _shell_topology(shells[1], shells[0].shape[0])
             if not any(topology[:3]):
                 (vertices, faces), (boundary, nonmanifold, flipped, fans, shell) = shells, topology
+    turned, disagreed = np.zeros(faces.shape[0], dtype=bool), flipped
+    if flipped and not boundary and not nonmanifold:  # one shell with some triangles turned the wrong way
+        oriented = _oriented_shell(faces)
+        if oriented is not None:
+            faces, turned = oriented
+            boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
     if boundary or nonmanifold or flipped:
         where = _bad_edge_example(vertices, faces, "boundary" if boundary else "nonmanifold" if nonmanifold else "flipped")
         raise _status_error("NotManifold", label, boundary, nonmanifold, flipped, where)
@@ -670,9 +742,12 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
     if n_shells == 1:
         lo, hi, _ = bounding_box(vertices)
         volume, area = _volume_area(vertices, faces, math.ldexp(1.0, -math.frexp(float((hi - lo).max()))[1]))
+        if volume < 0:  # one closed shell bounds one solid: its triangles face in
+            faces, volume, turned = np.ascontiguousarray(faces[:, ::-1]), -volume, ~turned
         if not volume > 0:
-            raise ParoctError(f"{label}: the surface encloses zero or negative volume (volume = {volume:.6g}, inside out?)")
-        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1, groups, names))
+            raise ParoctError(f"{label}: the surface encloses zero volume (volume = {volume:.6g})")
+        return _validated(Surface(vertices, faces, float(volume), float(area), _genus(fans, faces, 1), 1, groups, names,
+                                  _turned_note(turned, disagreed, label)))
 
     # Several shells: manifold3d checks each, unions the solids and subtracts the cavities.
     solids, cavities, lost, signed_sum, area_sum = [], [], [], 0.0, 0.0
