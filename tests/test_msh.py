@@ -248,3 +248,29 @@ def test_a_byte_order_mark_is_read_past_and_a_msh_of_neither_kind_says_so(tmp_pa
     assert main(["check", str(path)]) == 2
     assert capsys.readouterr().err.strip().endswith(
         "not a Gmsh MSH file (it does not start with $MeshFormat), nor an ANSYS one")
+
+
+@pytest.mark.parametrize("kind", ["triangle6", "quad9"])
+def test_second_order_surfaces_read_as_their_corners(tmp_path, kind):
+    """A 1 x 2 x 3 box's surface as second-order elements (Gmsh types 9 and 10), their edge
+    and face nodes pushed off the flat faces: the surface is the triangles between the
+    corners, and the solid the box (a second-order mesh is refused no more)."""
+    from paroct import load_surface
+    corners = np.array([[0, 0, 0], [1, 0, 0], [1, 2, 0], [0, 2, 0], [0, 0, 3], [1, 0, 3], [1, 2, 3], [0, 2, 3]], float)
+    quads = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
+    polygons = quads if kind == "quad9" else np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    points, cells = list(corners), []
+    for poly in polygons:
+        extra = []
+        for a, b in zip(poly, np.roll(poly, -1)):  # edge nodes, then (quads) the centre node
+            extra.append(len(points))
+            points.append((corners[a] + corners[b]) / 2 + RNG.normal(size=3) * 0.05)
+        if kind == "quad9":
+            extra.append(len(points))
+            points.append(corners[poly].mean(axis=0) + RNG.normal(size=3) * 0.05)
+        cells.append(list(poly) + extra)
+    path = tmp_path / f"box_{kind}.msh"
+    meshio.write(path, meshio.Mesh(np.array(points), [(kind, np.array(cells))]), file_format="gmsh22", binary=False)
+    surface = load_surface(path)
+    assert surface.volume == pytest.approx(6.0, rel=1e-12) and surface.faces.shape == (12, 3)
+    assert (surface.components, surface.genus) == (1, 0)
