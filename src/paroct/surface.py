@@ -425,6 +425,20 @@ def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray,
 
 
 @nb.njit(cache=True)
+def _half_edges_by_edge(faces, n_vertices):
+    """Half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k + 1) % 3]: its edge's key (3 F,),
+    smaller end * n_vertices + larger, and the half-edges in order of keys (stable), so those
+    of one edge are neighbours."""
+    nf = faces.shape[0]
+    keys = np.empty(3 * nf, dtype=np.int64)
+    for f in range(nf):
+        for k in range(3):
+            p, q = np.int64(faces[f, k]), np.int64(faces[f, (k + 1) % 3])
+            keys[3 * f + k] = min(p, q) * n_vertices + max(p, q)
+    return keys, np.argsort(keys, kind="mergesort")
+
+
+@nb.njit(cache=True)
 def _pair_and_split(vertices, faces, any_order):
     """_split_touching_sheets' kernel: half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k + 1) % 3]
     and starts at corner h; twins are paired by edge, then corners joined through twins
@@ -432,12 +446,7 @@ def _pair_and_split(vertices, faces, any_order):
     where no order around an edge pairs its faces, pair them in half-edge order instead."""
     nf = faces.shape[0]
     nv = np.int64(vertices.shape[0])
-    keys = np.empty(3 * nf, dtype=np.int64)
-    for f in range(nf):
-        for k in range(3):
-            p, q = np.int64(faces[f, k]), np.int64(faces[f, (k + 1) % 3])
-            keys[3 * f + k] = min(p, q) * nv + max(p, q)
-    order = np.argsort(keys, kind="mergesort")
+    keys, order = _half_edges_by_edge(faces, nv)
     twin = np.full(3 * nf, -1, dtype=np.int64)
     angle = np.empty(3 * nf)
     i = 0
@@ -564,13 +573,7 @@ def _orient_faces(faces):
     the two of each edge are twins; a search from face 0 turns each face reached so that it
     runs its edge with the face it came from the other way."""
     nf = faces.shape[0]
-    nv = np.int64(faces.max()) + 1
-    keys = np.empty(3 * nf, dtype=np.int64)
-    for f in range(nf):
-        for k in range(3):
-            p, q = np.int64(faces[f, k]), np.int64(faces[f, (k + 1) % 3])
-            keys[3 * f + k] = min(p, q) * nv + max(p, q)
-    order = np.argsort(keys, kind="mergesort")
+    order = _half_edges_by_edge(faces, np.int64(faces.max()) + 1)[1]
     twin = np.empty(3 * nf, dtype=np.int64)
     for i in range(0, 3 * nf, 2):  # every edge in exactly two faces: sorted keys come in pairs
         twin[order[i]], twin[order[i + 1]] = order[i + 1], order[i]
