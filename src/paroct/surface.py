@@ -395,8 +395,7 @@ def _volume_area(vertices, faces, scale):
     return volume / 6.0 / scale / scale / scale, area / 2.0 / scale / scale
 
 
-def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray,
-                           any_order: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The surface with sheets that touch along edges taken apart, or None if some edge
     cannot be: (vertices (V', 3) float64, faces (F, 3) int32, the same triangles).
 
@@ -408,19 +407,19 @@ def _split_touching_sheets(vertices: np.ndarray, faces: np.ndarray,
     hi, a face running hi -> lo with the next face counter-clockwise) gives each edge two
     faces, and giving every fan of faces around a vertex its own copy of the vertex makes
     the surface a 2-manifold bounding the same solid: the touching sheets are kept apart, as
-    manifold3d keeps them.  None if an edge has an odd count, two neighbours run it the same
-    way (solids that overlap there), or a face around it is flat (its third vertex on the
-    edge's line, where no angle orders it).
+    manifold3d keeps them.
 
-    any_order: at such an edge, pair the k-th face running it one way with the k-th running it
-    the other (None only where the two counts differ).  Solids that overlap, or touch over an
-    area with shared vertices (boxes stacked face to face, panels side by side), come apart
-    into closed shells that may cross or touch there; the triangles are the same, and so is
-    every point's winding number, so the union of the shells (surface_from_arrays) is the
-    solid the surface bounds.
+    Where no order about an edge pairs its faces (two neighbours run it the same way: solids
+    that overlap there; or a face is flat, its third vertex on the edge's line), the k-th face
+    running it one way is paired with the k-th running it the other.  Solids that overlap, or
+    touch over an area with shared vertices (boxes stacked face to face, panels side by side),
+    come apart into closed shells that may cross or touch there; the triangles are the same,
+    and so is every point's winding number, so the union of the shells (surface_from_arrays)
+    is the solid the surface bounds.  None if an edge's faces run it one way more often than
+    the other.
     """
     new_vertices, new_faces, ok = _pair_and_split(np.ascontiguousarray(vertices, dtype=np.float64),
-                                                  np.ascontiguousarray(faces, dtype=np.int32), any_order)
+                                                  np.ascontiguousarray(faces, dtype=np.int32))
     return (new_vertices, new_faces) if ok else None
 
 
@@ -439,11 +438,11 @@ def _half_edges_by_edge(faces, n_vertices):
 
 
 @nb.njit(cache=True)
-def _pair_and_split(vertices, faces, any_order):
+def _pair_and_split(vertices, faces):
     """_split_touching_sheets' kernel: half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k + 1) % 3]
-    and starts at corner h; twins are paired by edge, then corners joined through twins
-    (union-find) become the new vertices, numbered in order of first corner.  any_order:
-    where no order around an edge pairs its faces, pair them in half-edge order instead."""
+    and starts at corner h; twins are paired by edge (about it, else in half-edge order), then
+    corners joined through twins (union-find) become the new vertices, numbered in order of
+    first corner."""
     nf = faces.shape[0]
     nv = np.int64(vertices.shape[0])
     keys, order = _half_edges_by_edge(faces, nv)
@@ -458,7 +457,7 @@ def _pair_and_split(vertices, faces, any_order):
             return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
         hi = keys[order[i]] % nv
         if not (_pair_by_angle(vertices, faces, order[i:j], keys[order[i]] // nv, hi, angle, twin)
-                or any_order and _pair_in_order(faces, order[i:j], hi, twin)):
+                or _pair_in_order(faces, order[i:j], hi, twin)):
             return np.empty((0, 3)), np.empty((0, 3), dtype=np.int32), False
         i = j
     parent = np.arange(3 * nf)
@@ -721,17 +720,12 @@ def surface_from_arrays(vertices: np.ndarray, faces: np.ndarray, label: str = "s
         raise ParoctError(f"{label}: every triangle is degenerate (repeated vertex)")
     _check_scale(vertices, label)
     boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
-    if nonmanifold and not boundary and not flipped:
+    if nonmanifold and not boundary:  # solids touching along edges, overlapping or touching over an area
         split = _split_touching_sheets(vertices, faces)
         if split is not None:
-            vertices, faces = split
-            boundary, nonmanifold, flipped, fans, shell = _shell_topology(faces, vertices.shape[0])
-    if nonmanifold and not boundary:  # overlapping, or touching over an area: their union
-        shells = _split_touching_sheets(vertices, faces, any_order=True)
-        if shells is not None:
-            topology = _shell_topology(shells[1], shells[0].shape[0])
-            if not any(topology[:3]):
-                (vertices, faces), (boundary, nonmanifold, flipped, fans, shell) = shells, topology
+            topology = _shell_topology(split[1], split[0].shape[0])
+            if not any(topology[:3]):  # pairs that cross sheets may leave edges joined
+                (vertices, faces), (boundary, nonmanifold, flipped, fans, shell) = split, topology
     turned, disagreed = np.zeros(faces.shape[0], dtype=bool), flipped
     if flipped and not boundary and not nonmanifold:  # one shell with some triangles turned the wrong way
         oriented = _oriented_shell(faces)
