@@ -32,6 +32,9 @@ TYPE_NAMES = {1: "line", 2: "triangle", 3: "quad", 4: "tetra", 5: "hexahedron", 
 TYPE_DIMENSION = {kind: 0 if kind == 15 else 1 if kind in (1, 8, 26, 27, 28) else
                   2 if kind in (2, 3, 9, 10, 16, 20, 21, 22, 23, 24, 25) else 3 for kind in NODES_PER_TYPE}
 TRIANGLE, QUAD, TETRA = 2, 3, 4
+#: The quads among the surface types, of any order (4, 9 and 8 nodes); the others are triangles.
+#: An element lists its corners first.
+QUAD_TYPES = (QUAD, 10, 16)
 _SPACE = re.compile(rb"\s*")
 _COUNT = re.compile(r"[0-9]{1,18}")
 _TAG = re.compile(r"-?[0-9]{1,18}")

@@ -664,14 +664,13 @@ def _read_msh(data: bytes) -> SurfaceFile:
     in a file with no physical groups, by geometrical surface (``surface_<tag>``: the CAD
     faces).  Second- and higher-order triangles and quads give their corners (the flat
     triangles between them).  Other elements (points, lines, a volume's tets) are ignored."""
-    from .msh import TYPE_DIMENSION, MshError, read_msh, type_name
+    from .msh import QUAD_TYPES, TYPE_DIMENSION, MshError, read_msh, type_name
 
     try:
         msh = read_msh(data)
     except MshError as exc:
         raise _Malformed(str(exc)) from None
-    # Gmsh lists an element's corners first; its quads of any order are types 3, 10 and 16.
-    surface = [msh.elements[kind]._replace(nodes=msh.elements[kind].nodes[:, :4 if kind in (3, 10, 16) else 3])
+    surface = [msh.elements[kind]._replace(nodes=msh.elements[kind].nodes[:, :4 if kind in QUAD_TYPES else 3])
                for kind in sorted(msh.elements) if TYPE_DIMENSION.get(kind) == 2]
     if not surface:
         kinds = sorted(type_name(kind) for kind in msh.elements)
