@@ -639,9 +639,9 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
     Before a round, the coarsest not yet tried is meshed over the whole band when
     estimate_tets puts it below the round's _local_tets (before the first round size / 2,
-    then size / 4 below QUARTER_BAND_SHARE of it), once each; the rounds go on where it loses.  The rounds' local
-    volume error is what the thin places lose, and stuffing's error elsewhere (second order in
-    size, a chord's) none of them mends: a sphere of 0.5 M triangles united with a cube lost
+    then size / 4 below QUARTER_BAND_SHARE of it), once each; the rounds go on where it
+    loses.  The rounds' local volume error is what the thin places lose, and stuffing's error
+    elsewhere (second order in size, a chord's) none of them mends: a sphere of 0.5 M triangles united with a cube lost
     1.5-1.7 % at diag/20 in four rounds to size / 16, 1.0 s, and the whole band at size / 2
     keeps it.
 
