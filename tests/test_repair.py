@@ -85,7 +85,8 @@ def test_star_partners_match_a_pairwise_twin(seed):
         if seed % 2:
             star = rng.permutation(star)[: max(1, int(rng.integers(1, star.size + 1)))]
         partner = np.full(4 * star.size, -2, dtype=np.int64)
-        repair._star_partners(tets, star, star.size, v, partner)
+        repair._star_partners(tets, star, star.size, v, partner, np.empty(3 * star.size, dtype=np.int64),
+                               np.empty(3 * star.size, dtype=np.int64))
         want = naive.star_partners(tets, star.tolist(), int(v))
         assert {key: int(partner[4 * key[0] + key[1]]) for key in want} == want
 
@@ -182,6 +183,24 @@ def _cluster_twin(tets, bad, points):
             return _best_order_twin(tets, bad, points)
         want &= alive
     return want
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_whole_mesh_repair_by_points_is_the_best_order_twins(seed):
+    """At ring 0 every removal leaves the stars, so local_repair with points repairs the whole
+    mesh in the one order that removes the least volume: the twin's, with points the tets do
+    not use (ranked apart, as the stuffed mesh's lattice vertices outside the solid) at random
+    places among them, some on used points."""
+    tets, core = _pinched_block(seed, n=8)
+    points = _pinched_block_points(seed, n=8)
+    rng = np.random.default_rng(seed)
+    unused = np.concatenate([rng.uniform(-1.0, 9.0, (40, 3)), points[rng.integers(len(points), size=10)]])
+    points = np.concatenate([points, unused])
+    faces = boundary_faces(tets, match_faces(tets)[0])
+    bad = np.nonzero(nonmanifold_vertices(faces, len(points)))[0]
+    got = local_repair(tets, bad, len(points), rings=0, points=points)
+    want = _best_order_twin(tets, bad, points)
+    assert not got.all() and np.array_equal(got, want)
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -41,17 +41,16 @@ def _vertex_tets(tets, n_vertices):
 
 
 @nb.njit(cache=True)
-def _star_partners(tets, star, n, v, partner):
+def _star_partners(tets, star, n, v, partner, keys, slots):
     """partner[4 i + k] = the index j != i in star[:n] of the tet sharing with tet star[i] its
     face through v opposite its vertex k (the smallest such j), -1 if none, for the k whose
-    vertex is not v: a face through v has both its tets in v's star.
+    vertex is not v: a face through v has both its tets in v's star.  keys, slots: scratch
+    of at least 3 n.
 
     The faces are keyed by their two vertices other than v and sorted (insertion sort: 3 n
     keys, n about 24), so equal keys are neighbours; testing every pair of the star's tets
     vertex by vertex cost 3 n^2 x 16 comparisons, 17 us a vertex (a plate whose 0.01 slots
     the lattice bridged at size / 8 had 83 k pinched vertices: 1.4 -> 0.66 s a repair)."""
-    keys = np.empty(3 * n, dtype=np.int64)
-    slots = np.empty(3 * n, dtype=np.int64)
     m = 0
     for i in range(n):
         t = star[i]
@@ -121,15 +120,22 @@ def _ranks_without(tets, t, v, rank):
     return out
 
 
+#: Rows of _repair_star's scratch: the live star, the link's sources and targets, the
+#: pieces' labels, the face partners, _star_partners' keys and slots, the pieces' sizes.
+STAR_SCRATCH_ROWS = 8
+
+
 @nb.njit(cache=True)
-def _repair_star(v, tets, alive, offsets, ids, remove_out, rank):
+def _repair_star(v, tets, alive, offsets, ids, remove_out, rank, scratch):
     """Check vertex v; if its live boundary is not one fan, mark tets to remove in remove_out
     (the star's pieces but the largest, of equal largest the one holding the first tet by
     _tet_before; the whole star if it is one piece).  Face neighbours come from the live star
-    itself.  Returns the count."""
+    itself.  Returns the count.  scratch: (STAR_SCRATCH_ROWS, 4 x the largest star) int64,
+    reused from vertex to vertex (fresh arrays a check cost 60 % of the repair of round_rod's
+    pass at diag/160, 40 k checks)."""
     lo = offsets[v]
     hi = offsets[v + 1]
-    star = np.empty(hi - lo, dtype=np.int64)
+    star = scratch[0]
     n = 0
     for i in range(lo, hi):
         if alive[ids[i]]:
@@ -138,12 +144,14 @@ def _repair_star(v, tets, alive, offsets, ids, remove_out, rank):
     if n == 0:
         return 0
     # Boundary link edges p -> q from live boundary faces (v, p, q) of the star.
-    src = np.empty(3 * n, dtype=np.int64)
-    dst = np.empty(3 * n, dtype=np.int64)
+    src = scratch[1]
+    dst = scratch[2]
     m = 0
-    label = np.arange(n)
-    partner = np.empty(4 * n, dtype=np.int64)
-    _star_partners(tets, star, n, v, partner)
+    label = scratch[3]
+    for i in range(n):
+        label[i] = i
+    partner = scratch[4]
+    _star_partners(tets, star, n, v, partner, scratch[5], scratch[6])
     for i in range(n):
         t = star[i]
         for k in range(4):
@@ -197,10 +205,11 @@ def _repair_star(v, tets, alive, offsets, ids, remove_out, rank):
         ok = ok and steps == m and cur == src[0]
     if ok:
         return 0
-    sizes = np.zeros(n, dtype=np.int64)
+    sizes = scratch[7]
+    sizes[:n] = 0
     for i in range(n):
         sizes[label[i]] += 1
-    largest = np.max(sizes)
+    largest = np.max(sizes[:n])
     keep = -1
     for i in range(n):  # the piece of the first tet, by the vertices' ranks, among the largest
         if sizes[label[i]] == largest and (keep < 0 or _tet_before(tets, star[i], star[keep], v, rank)):
@@ -235,14 +244,16 @@ def _repair(tets, bad_vertices, n_vertices, complete, rank):
         work[top] = v
         top += 1
         queued[v] = True
-    buf = np.empty(np.int64(np.max(offsets[1:] - offsets[:-1])) + 1, dtype=np.int64)
+    largest_star = np.int64(np.max(offsets[1:] - offsets[:-1])) + 1
+    buf = np.empty(largest_star, dtype=np.int64)
+    scratch = np.empty((STAR_SCRATCH_ROWS, 4 * largest_star), dtype=np.int64)
     while top > 0:
         top -= 1
         v = work[top]
         queued[v] = False
         if not complete[v]:
             return alive, False
-        count = _repair_star(v, tets, alive, offsets, ids, buf, rank)
+        count = _repair_star(v, tets, alive, offsets, ids, buf, rank, scratch)
         first_new = top
         for i in range(count):
             t = buf[i]
@@ -459,7 +470,9 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
                                points[vertex_of])
     if kept is None:  # a cluster's worklist left its stars in every order
         whole = np.ones(n_vertices, dtype=bool)
-        kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order) for order in PINCH_ORDERS], points, tets)
+        used = np.flatnonzero(used_vertices(tets, n_vertices))
+        kept = _least_volume_repair(tets, bad, whole, [_ranks(points, order, used) for order in PINCH_ORDERS], points,
+                                    tets)
         assert kept is not None  # on the whole mesh every star is complete
         return kept
     alive = np.ones(tets.shape[0], dtype=bool)
@@ -510,12 +523,29 @@ def _least_volume_repair(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray
     volume (ties: the first) among those that stay where stars are complete, or None if none
     does.  mesh_tets: the same tets by mesh ids, points (V, 3) theirs (for the volumes)."""
     best, best_volume = None, np.inf
-    for rank in ranks:
-        kept, ok = _repair(tets, bad[np.argsort(rank[bad], kind="stable")], complete.shape[0], complete, rank)
+    in_orders = np.stack([bad[np.argsort(rank[bad], kind="stable")] for rank in ranks])
+    alive, ok = _repairs_in_orders(tets, in_orders, complete.shape[0], complete, np.stack(ranks))
+    for kept, stayed in zip(alive, ok):
         volume = _volume(points, mesh_tets[~kept])
-        if ok and volume < best_volume:
+        if stayed and volume < best_volume:
             best, best_volume = kept, volume
     return best
+
+
+@nb.njit(cache=True, parallel=True)
+def _repairs_in_orders(tets, bad_in_orders, n_vertices, complete, ranks):
+    """_repair in each order at once, one order to a thread (each owns its row of the
+    output): the kept masks (O, M) and ok (O,) of the bad vertices bad_in_orders[o] (O, B)
+    by ranks[o] (O, V).  (In turn, the four orders took 50 ms of round_rod's pass at
+    diag/160, 67 k tets and 2.7 k bad vertices.)"""
+    n_orders = ranks.shape[0]
+    alive = np.empty((n_orders, tets.shape[0]), dtype=np.bool_)
+    ok = np.empty(n_orders, dtype=np.bool_)
+    for o in nb.prange(n_orders):
+        kept, stayed = _repair(tets, bad_in_orders[o], n_vertices, complete, ranks[o])
+        alive[o] = kept
+        ok[o] = stayed
+    return alive, ok
 
 
 def _clusters(sub: np.ndarray, bad: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -580,14 +610,20 @@ def _volume(points: np.ndarray, tets: np.ndarray) -> float:
     return float(np.abs(np.einsum("ij,ij->i", a, np.cross(b, c))).sum() / 6.0)
 
 
-def _ranks(points: np.ndarray, order: tuple) -> np.ndarray:
+def _ranks(points: np.ndarray, order: tuple, used: np.ndarray | None = None) -> np.ndarray:
     """Rank (V,) int64 of each point (points (V, 3)) in one of PINCH_ORDERS of the
     coordinates: order = (axes, sign), lexicographic over sign * the coordinates in axes
-    order, equal points by id."""
+    order, equal points by id.  used: the ids (ascending) of the only points the caller
+    compares (the others rank 0): the stuffed mesh's points include every lattice vertex,
+    most in no tet (round_rod's pass at diag/160: 25 k of 124 k, 41 -> 11 ms for four)."""
     axes, sign = order
-    keys = sign * points[:, list(axes)]
-    rank = np.empty(points.shape[0], dtype=np.int64)
-    rank[np.lexsort(keys.T[::-1])] = np.arange(points.shape[0])
+    keys = sign * (points[:, list(axes)] if used is None else points[used][:, list(axes)])
+    ranked = np.empty(keys.shape[0], dtype=np.int64)
+    ranked[np.lexsort(keys.T[::-1])] = np.arange(keys.shape[0])
+    if used is None:
+        return ranked
+    rank = np.zeros(points.shape[0], dtype=np.int64)
+    rank[used] = ranked
     return rank
 
 
