@@ -226,8 +226,9 @@ def test_whole_band_fallback_goes_by_halves_coarsest_first(monkeypatch, halving_
 
     def rounds(surface, field, walls, floor, budget, lost, wholes, *args):
         assert wholes == pytest.approx([h / 2, h / 4])  # above the floor, size / 8
-        tried = [h / 2] if halving_lost else []
-        return None, "the rounds failed", tried, [f"tried {s}" for s in tried]
+        half = mesher.LosingPass(h / 2, "the mesh lost a wall", "", mesher.MeshReport(size=h / 2, levels=0), None, None)
+        tried = [half] if halving_lost else []
+        return None, "the rounds failed", tried, [f"tried {p.band}" for p in tried]
 
     monkeypatch.setattr(mesher, "_mesh_at", pass_losing_above_quarter)
     monkeypatch.setattr(mesher, "_thin_locally", rounds)
@@ -374,10 +375,64 @@ def test_bound_check_skips_only_copied_lattice_tets(monkeypatch):
 
 
 def test_min_size_floor_is_reported_in_one_line():
+    """The fin (0.03) is lost at size 0.1 (3.7 % of the volume) and full of holes at min_size
+    0.05 (genus 171, 2.3 %): nearer in volume, further in topology, the pass at 0.05 keeps
+    more by one measure, so no coarser pass is returned for it, and the one warning says why
+    it went no finer and what would keep the fin."""
     result = mesh(_FIN_PART, size=0.1, min_size=0.05)
     rep = result.report
-    assert rep.size == pytest.approx(0.05)
-    assert len(rep.warnings) == 1 and "min_size = 0.05 reached" in rep.warnings[0] and "thinnest wall" in rep.warnings[0]
+    assert rep.size == pytest.approx(0.05) and rep.boundary_genus > 0
+    assert len(rep.warnings) == 1 and rep.warnings[0].startswith("min_size = 0.05 reached; the mesh lost")
+    assert "thinnest wall" in rep.warnings[0]
+
+
+def _fins_part(fin: float, rod: float) -> manifold3d.Manifold:
+    """A slab with a fin 1e-5 thick, which no size above min_size keeps, and a fin ``fin``
+    thick and a rod of radius ``rod`` (each left out if 0), which finer passes may keep."""
+    part = (manifold3d.Manifold.cube([1.0, 1.0, 0.2])
+            + manifold3d.Manifold.cube([0.6, 1e-5, 0.4]).translate([0.2, 0.8, 0.2]))
+    if fin:
+        part += manifold3d.Manifold.cube([0.6, fin, 0.4]).translate([0.2, 0.3, 0.2])
+    if rod:
+        part += manifold3d.Manifold.cylinder(1.0, rod, rod, 16).translate([0.5, 0.5, 0.2])
+    return part
+
+
+def _fin_tips(surface) -> np.ndarray:
+    """Ids of the 1e-5 fin's top vertices."""
+    return np.flatnonzero((surface.vertices[:, 2] > 0.6 - 1e-9) & (surface.vertices[:, 1] > 0.8 - 1e-9))
+
+
+def test_the_coarsest_pass_keeping_as_much_as_the_finer_ones_is_kept():
+    """Every pass loses the 1e-5 fin.  At size the 0.06 fin comes out full of holes; size / 2
+    keeps it, and the finer passes (size / 4 tried before the rounds near thin places, then
+    the whole band at size / 8) keep no more: size / 2 is kept, made again (only the pass at
+    size is held), the same as a pass there alone, with the fin's tips its only misses."""
+    h = 0.1
+    surface = load_surface(_fins_part(fin=0.06, rod=0.0))
+    result = mesh(surface, size=h)
+    rep = result.report
+    assert rep.size == pytest.approx(h / 2) and rep.boundary_genus == 0 and abs(rep.volume_error) < 0.01
+    assert np.array_equal(rep.missed_vertices, _fin_tips(surface))
+    assert any(note.startswith(f"boundary size {h:.4g} -> {h / 8:.4g}") for note in rep.notes)
+    assert len(rep.warnings) == 1 and "the pass at boundary size 0.05 is kept" in rep.warnings[0]
+    alone = mesh(surface, size=h / 2, max_size=8 * h, thin_features=False)
+    assert np.array_equal(result.mesh.tets, alone.mesh.tets) and np.array_equal(result.mesh.points, alone.mesh.points)
+    _assert_valid(result.mesh.points, result.mesh.tets, surface)
+
+
+def test_a_finer_pass_that_misses_less_of_the_surface_is_kept():
+    """The rod (0.02 across) is dropped at size, / 2 and / 4 with no change of topology or
+    volume; only the whole band at size / 8 keeps it.  Its boundary misses fewer surface
+    vertices, by the coarser passes' reach too, so it is the mesh returned, warning only of
+    the 1e-5 fin."""
+    surface = load_surface(_fins_part(fin=0.0, rod=0.01))
+    result = mesh(surface, divisions=15)
+    rep = result.report
+    assert rep.size == pytest.approx(rep.requested_size / 8)
+    assert np.array_equal(rep.missed_vertices, _fin_tips(surface))
+    assert result.mesh.points[:, 2].max() > 1.2 - 0.01  # the rod's top
+    assert len(rep.warnings) == 1 and "is kept" not in rep.warnings[0]
 
 
 _ROD_PART = (manifold3d.Manifold.cube([1.0, 1.0, 0.2])

@@ -61,7 +61,7 @@ def test_topology_by_owners_is_the_whole_boundarys(seed):
 @pytest.mark.parametrize("seed", range(4))
 def test_misses_by_owners_are_the_whole_boundarys(seed):
     """Random triangles near part of bunny's surface, dealt into ranges with random owners:
-    the surface vertices and long triangles they miss are mesher._measure_misses' of the
+    the surface vertices and long triangles they miss are mesher.boundary_misses' of the
     triangles joined."""
     rng = np.random.default_rng(800 + seed)
     surface = paroct.load_surface(DATA / "bunny.stl")
@@ -71,14 +71,13 @@ def test_misses_by_owners_are_the_whole_boundarys(seed):
     faces = rng.integers(0, points.shape[0], size=(25, 3))
     n_ranges = int(rng.integers(1, 7))
     owner_of = rng.integers(0, n_ranges, size=points.shape[0])
-    report = mesher.MeshReport(size=size, levels=0)
-    mesher._measure_misses(surface, points, faces, size, report)
-    assert 0 < report.missed_vertices.shape[0] < surface.vertices.shape[0] and report.missed_faces.size
+    want_vertices, want_faces = mesher.boundary_misses(surface, points[np.unique(faces)], size)
+    assert 0 < want_vertices.shape[0] < surface.vertices.shape[0] and want_faces.size
     parts = [RangeTets(np.arange(points.shape[0]), np.zeros((0, 4), dtype=np.int32), np.zeros(points.shape[0], dtype=bool),
                        points, owner_of)] * n_ranges  # each range holds every point: positions read by local id
     missed_vertices, missed_faces = misses_by_owners(_owned(faces, owner_of, rng, n_ranges), parts, surface, size)
-    assert np.array_equal(missed_vertices, report.missed_vertices)
-    assert np.array_equal(missed_faces, report.missed_faces)
+    assert np.array_equal(missed_vertices, want_vertices)
+    assert np.array_equal(missed_faces, want_faces)
 
 
 @pytest.mark.parametrize("seed", range(6))

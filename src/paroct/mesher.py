@@ -317,7 +317,10 @@ def mesh(
     the whole boundary at the coarsest of size / 2, size / 4, ... not yet tried, where
     estimated at fewer tets than that round; if that does not keep the solid, the whole
     boundary size shrinks by halves instead (skipping the sizes tried), as far as max_memory
-    allows (not below size / 8 unless min_size is given).  The report's notes say what was done.
+    allows (not below size / 8 unless min_size is given).  Where every pass loses, the
+    coarsest that no finer one keeps more of the solid than (keeps_more) is returned with a
+    warning: the size asked, where refining kept nothing more.  The report's notes say what
+    was done.
     False keeps size and only warns.  A mesh that keeps less than half the solid's volume
     raises ParoctError, as one with no tets does.  max_memory: bytes the run may use
     (default: the machine's available memory); a size that would need more is refused before
@@ -418,11 +421,11 @@ class PassOutcome(NamedTuple):
 
 class LocalOutcome(NamedTuple):
     """What refining near thin places gave halve_whole_band: the result if it kept the solid
-    (else None), the whole-band sizes it tried that lost, notes on them, and whether memory
+    (else None), the whole-band passes it tried that lost, notes on them, and whether memory
     stopped it."""
 
     result: MeshResult | None
-    tried: list[float]
+    tried: list[LosingPass]
     notes: list[str]
     memory_bound: bool
 
@@ -448,22 +451,28 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
     thin_features, refine_locally (if given) near the walls after the first, then the whole
     band at halves of the size (skipping those refine_locally tried), down to whole_floor as
     the budget allows, until a pass keeps the solid or a finer pass loses more with nothing
-    to explain it (touching parts).  Returns the last pass's result (or the best one kept),
-    its report noting the steps (notes first) and warning of what it lost.  ParoctError if
+    to explain it (touching parts).  Returns the last pass's result, or if it lost, the
+    best one kept or else the coarsest that no finer pass keeps more than
+    (coarsest_keeping_as_much), its report noting the steps (notes first) and warning of what
+    it lost.  ParoctError if
     it keeps less than half the solid or has no tets."""
     h = field.size
     band, memory_bound, tried = h, False, list[float]()  # tried: whole-band sizes below h that a pass lost at
     best: tuple | None = None  # the whole-band pass whose boundary is nearest the input's so far
+    losing: list[LosingPass] = []  # every whole-band pass that lost
     kept_text = ""
     while True:
         result, lost, advice, walls, report, note = one_pass(band)
         if note:
             notes.append(note)
+        if lost:
+            losing.append(losing_pass(band, result, lost, advice, report, keep=band == h))
         if refine_locally is not None and thin_features and lost and band == h and walls is not None:
             local = refine_locally(report, lost, walls)
             if local.result is not None:
                 return local.result
-            tried = local.tried
+            tried = [p.band for p in local.tried]
+            losing.extend(local.tried)
             notes.extend(local.notes)
             memory_bound = local.memory_bound
         # Parts touching along an edge or at a point have no wall or gap between them that a
@@ -502,21 +511,91 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
         band = finer
     report.notes = notes
     if lost:
-        floor_text = ""
-        if kept_text:
-            floor_text = kept_text
-        elif thin_features and band <= floor * (1 + 1e-9):
-            floor_text = f"min_size = {floor:.4g} reached; "
-        elif thin_features and memory_bound:
-            floor_text = f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
-        elif thin_features and band <= whole_floor * (1 + 1e-9) and refine_locally is not None:
-            floor_text = f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
-        elif thin_features and band <= whole_floor * (1 + 1e-9):
-            floor_text = (f"the whole boundary refined to {band:.4g}, as far as it goes without min_size (finer only "
-                          "near thin places, which mesh() refines and meshing in ranges does not yet); ")
+        floor_text = kept_text or _why_no_finer(band, floor, whole_floor, thin_features, memory_bound,
+                                                refine_locally is not None)
+        coarser = None if kept_text else coarsest_keeping_as_much(surface, losing)
+        # A pass to refuse is refused at the finest size tried, which says the most.
+        if coarser is not None and coarser.band > band and not _losing_too_much(coarser.report):
+            floor_text += (f"the pass at boundary size {coarser.band:.4g} is kept, as the finer ones kept no more of "
+                           "the solid; ")
+            band, lost, advice, report = coarser.band, coarser.lost, coarser.advice, coarser.report
+            if coarser.result is None:  # only the pass at size is held; another is made again, the same
+                again = one_pass(band)
+                result, report = again.result, again.report
+            else:
+                result = coarser.result
+            report.notes = notes
         _refuse_losing_too_much(report, band, f"{floor_text}{advice}")  # why it went no finer, then what would keep it
         report.warnings.append(f"{floor_text}{lost}" + (f"; {advice}" if advice else ""))
     return result
+
+
+def _why_no_finer(band: float, floor: float, whole_floor: float, thin_features: bool, memory_bound: bool,
+                  refined_locally: bool) -> str:
+    """Why halve_whole_band's last pass, at boundary size band, lost and none finer was made
+    ('' if thin_features is off), as a clause ending in '; '."""
+    if thin_features and band <= floor * (1 + 1e-9):
+        return f"min_size = {floor:.4g} reached; "
+    if thin_features and memory_bound:
+        return f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
+    if thin_features and band <= whole_floor * (1 + 1e-9) and refined_locally:
+        return f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
+    if thin_features and band <= whole_floor * (1 + 1e-9):
+        return (f"the whole boundary refined to {band:.4g}, as far as it goes without min_size (finer only near thin "
+                "places, which mesh() refines and meshing in ranges does not yet); ")
+    return ""
+
+
+class LosingPass(NamedTuple):
+    """A whole-band pass that lost part of the solid (losing_pass): its boundary size, what it
+    lost, the advice, its report, its boundary's points (B, 3) (None if the result had no
+    boundary faces) and the result, if held."""
+
+    band: float
+    lost: str
+    advice: str
+    report: MeshReport
+    boundary_points: np.ndarray | None
+    result: MeshResult | None
+
+
+def losing_pass(band: float, result: MeshResult, lost: str, advice: str, report: MeshReport, keep: bool) -> LosingPass:
+    """The LosingPass of a pass at boundary size band, holding its result if keep (a mesh
+    held through the finer passes adds to their peak)."""
+    faces = result.boundary_faces
+    points = None if faces is None else np.compress(used_vertices(faces, result.mesh.points.shape[0]),
+                                                    result.mesh.points, axis=0)
+    return LosingPass(band, lost, advice, report, points, result if keep else None)
+
+
+def coarsest_keeping_as_much(surface: Surface, losing: Sequence[LosingPass]) -> LosingPass:
+    """The coarsest of the passes (at least one) that no finer one keeps more than
+    (keeps_more): where refining only spent tets, the mesh at the size asked.  A cube with
+    fins 1e-7 of it thick (a slicer's test part) lost them at size / 8 as at the size asked,
+    in 3.8 M tets for 36 k."""
+    ordered = sorted(losing, key=lambda p: -p.band)
+    for i, candidate in enumerate(ordered):
+        if not any(keeps_more(surface, finer, candidate) for finer in ordered[i + 1:]):
+            return candidate
+    raise ValueError("no losing passes")  # the finest has none finer
+
+
+def keeps_more(surface: Surface, finer: LosingPass, coarser: LosingPass) -> bool:
+    """Whether the finer pass keeps more of the solid than the coarser by any measure: a
+    boundary nearer the input's components and genus, a volume error smaller by over
+    VOLUME_LOSS_WARNING, or fewer surface vertices or triangle centres missed by the coarser
+    pass's reach (boundary_misses at its size: the finer pass's own reach is shorter).  Any
+    one will do: a pass nearer in topology but further in volume is no cheaper way to the
+    same loss (a plate lost whole against one full of holes).  A pass without its boundary's
+    points is taken to keep more."""
+    if _topology_distance(finer.report) < _topology_distance(coarser.report):
+        return True
+    if abs(finer.report.volume_error) < abs(coarser.report.volume_error) - VOLUME_LOSS_WARNING:
+        return True
+    if finer.boundary_points is None:
+        return True
+    vertices, centres = boundary_misses(surface, finer.boundary_points, coarser.band)
+    return vertices.size < coarser.report.missed_vertices.size or centres.size < coarser.report.missed_faces.size
 
 
 def _topology_distance(report: MeshReport) -> int:
@@ -604,6 +683,11 @@ def _mesh_with_asks(surface: Surface, field: SizeField, asks: FeatureAsks, budge
     return result, lost, advice, walls, report, note
 
 
+def _losing_too_much(report: MeshReport) -> bool:
+    """Whether _refuse_losing_too_much refuses the pass."""
+    return report.n_tets == 0 or report.volume_error < -LOST_TOO_MUCH
+
+
 def _refuse_losing_too_much(report: MeshReport, band: float, advice: str) -> None:
     """ParoctError if the mesh at boundary size band has no tets, or keeps less than half the
     solid (LOST_TOO_MUCH): what is left is not the part."""
@@ -629,7 +713,7 @@ def _local_depth(size: float, floor: float) -> int:
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: float, lost: str,
                   wholes: Sequence[float], progress: Callable[[str], None] | None,
-                  stage_seconds: dict, base: FeatureAsks) -> tuple[MeshResult | None, str, list[float], list[str]]:
+                  stage_seconds: dict, base: FeatureAsks) -> tuple[MeshResult | None, str, list[LosingPass], list[str]]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
     one level more while the mesh still loses topology or volume.
@@ -648,10 +732,11 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     Returns (result, '', tried, []) with the notes in the result's report; or (None, why,
     tried, notes) when that did not succeed (no thin place found: why = ''; the floor or the
     memory budget reached; the rounds stopped finding fewer tets outside the bound), and the
-    caller refines the whole band.  tried: the whole-band sizes that lost; notes: theirs."""
+    caller refines the whole band.  tried: the whole-band passes that lost (LosingPass,
+    results not held); notes: theirs."""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
     max_depth = _local_depth(field.size, floor)
-    wholes, tried, tried_notes = list(wholes), list[float](), list[str]()
+    wholes, tried, tried_notes = list(wholes), list[LosingPass](), list[str]()
     if max_depth < 1:  # min_size leaves no finer level to refine to
         return None, "", tried, tried_notes
     notes = [f"at boundary size {field.size:.4g} {lost}"]
@@ -694,13 +779,14 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
             why = (f"the whole band at size / {field.size / size:g} is estimated at {whole} tets, "
                    f"{'under a third of' if first_quarter else 'fewer than'} the {local} of a round near them")
             whole_report = _pass_report(surface, field, size, stage_seconds)
-            kept, still, _, _, whole_report, note = _whole_pass(surface, field, size, base, budget, whole_report,
-                                                                progress, stage_seconds)
+            kept, still, advice, _, whole_report, note = _whole_pass(surface, field, size, base, budget,
+                                                                     whole_report, progress, stage_seconds)
             if not still:
                 whole_report.notes = [*notes, f"boundary refined to {size:.4g} everywhere: {why}",
                                       *([note] if note else [])]
                 return kept, "", tried, []
-            tried.append(size)
+            tried.append(losing_pass(size, kept, still, advice, whole_report, keep=False))
+            del kept
             note = (f"boundary refined to {size:.4g} everywhere ({why}): at {size:.4g} {still}; "
                     f"refining near thin places from {field.size:.4g} instead")
             notes.append(note)
@@ -1094,7 +1180,7 @@ def _check_winding(frame: FatFrame, crossings: rays.RowCrossings, points: np.nda
 
 
 def _missed(report: MeshReport) -> bool:
-    """Whether the boundary missed a surface vertex or triangle centre (_measure_misses)."""
+    """Whether the boundary missed a surface vertex or triangle centre (boundary_misses)."""
     return bool(report.missed_vertices.size or report.missed_faces.size)
 
 
@@ -1144,7 +1230,11 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     stages.done("repair")
 
     _measure(points, out_tets, core, boundary, report)
-    _measure_misses(surface, points, faces_out, size, report)
+    # A kernel marks the boundary's points: numpy's scatter of True at faces.ravel() took 4 ms
+    # of tray_bottom's boundary at diag/40; compress is 3x points[mask].
+    boundary_points = np.compress(used_vertices(faces_out, points.shape[0]), points, axis=0)
+    report.missed_vertices, report.missed_faces = boundary_misses(surface, boundary_points, size)
+    del boundary_points
     points, out_tets, new_id = _compact(points, out_tets)
     point_faces = _point_faces(targets, cut_faces, new_id, points.shape[0])
     mesh = TetMesh(points, out_tets)
@@ -1187,19 +1277,16 @@ def _point_faces(targets, cut_faces, new_id, n_points):
 MISS_REACH = 3.0
 
 
-def _measure_misses(surface: Surface, points: np.ndarray, faces: np.ndarray, size: float, report: MeshReport) -> None:
-    """The surface vertices and triangles (by their centres; indices) the mesh boundary
-    (faces (B, 3) into points) misses: no boundary vertex within MISS_REACH x size.  A long
-    triangle's centre tells of a rod dropped between its ends, or of a spike through the solid;
-    only triangles with an edge over size are asked (armadillo's 86 k centres cost 2 ms a pass)."""
-    # A kernel marks them: numpy's scatter of True at faces.ravel() took 4 ms of tray_bottom's
-    # boundary at diag/40; compress is 3x points[mask].
-    boundary_points = np.compress(used_vertices(faces, points.shape[0]), points, axis=0)
+def boundary_misses(surface: Surface, boundary_points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """The surface vertices and triangles (by their centres; indices, ascending) the mesh
+    boundary (its vertices' points (B, 3)) misses: no boundary vertex within MISS_REACH x
+    size.  A long triangle's centre tells of a rod dropped between its ends, or of a spike
+    through the solid; only triangles with an edge over size are asked (armadillo's 86 k
+    centres cost 2 ms a pass)."""
     n = surface.vertices.shape[0]
     long, centres = long_triangle_centres(surface.vertices, surface.faces, size)
     far = far_from_points(np.concatenate([surface.vertices, centres]), boundary_points, MISS_REACH * size)
-    report.missed_vertices = np.flatnonzero(far[:n])
-    report.missed_faces = long[far[n:]]
+    return np.flatnonzero(far[:n]), long[far[n:]]
 
 
 #: Volume loss (relative) above which mesh() raises instead of returning the mesh with a

@@ -15,7 +15,7 @@ use leaving it.
    owner does not own are joined by that vertex's owner (an exchange of the interface's
    vertices only), and the joined labels are the components.
 4. Missed parts: each owner marks the surface vertices and long triangles' centres near
-   the boundary points it holds; those no owner marks are missed (mesher._measure_misses).
+   the boundary points it holds; those no owner marks are missed (mesher.boundary_misses).
 5. Compaction: each range sends the ids of the points its tets use to their owners, which
    number them (owners.owned_ids: each owner its distinct ids in ascending order, then an
    exclusive scan of the owners' counts; lattice vertices first, then cut points, as the
@@ -53,7 +53,7 @@ class RangeFinish:
     order; point_faces (N,) int32: the surface triangle each point lies on (-1: none);
     summary: the tets' quality (quality.TetSummary); topology: the boundary's;
     missed_vertices, missed_faces: the surface vertices and long triangles the boundary
-    misses (ascending; mesher._measure_misses)."""
+    misses (ascending; mesher.boundary_misses)."""
 
     points: np.ndarray
     tets: np.ndarray
@@ -177,7 +177,7 @@ def _joined_count(n_labels, a, b):
 
 def misses_by_owners(owned: Sequence[BoundaryFaces], parts: Sequence[RangeTets], surface: Surface,
                      size: float) -> tuple[np.ndarray, np.ndarray]:
-    """mesher._measure_misses over owners' boundary faces (boundary_by_owners' of the parts):
+    """mesher.boundary_misses over owners' boundary faces (boundary_by_owners' of the parts):
     the surface vertices and long triangles (by their centres) with no boundary point within
     MISS_REACH x size, each owner testing those in its points' box widened by that reach
     (the others are farther from its points).  The points' positions come from the ranges
