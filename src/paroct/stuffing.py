@@ -640,10 +640,18 @@ def _stencils(tets, signs, coords, first_centre, table, n_lattice, prism, offset
     scratch = np.empty((4, 6), dtype=np.int64)
     for t in range(tets.shape[0]):
         k = offsets[t]
-        if signs[tets[t, 0]] > 0 and signs[tets[t, 1]] > 0 and signs[tets[t, 2]] > 0 and signs[tets[t, 3]] > 0:
-            for i in range(4):  # the common case, a lattice tet wholly inside: copied
+        s0, s1, s2, s3 = signs[tets[t, 0]], signs[tets[t, 1]], signs[tets[t, 2]], signs[tets[t, 3]]
+        lowest = min(min(s0, s1), min(s2, s3))
+        highest = max(max(s0, s1), max(s2, s3))
+        # The patterns without a cut here, not through _stencil_tet: a pass through it cost
+        # about 40 ns even for these (round_rod's band at diag/40, 0.71 M lattice tets, two
+        # thirds of them uncut: 16 -> 6 ms).
+        if highest <= 0:
+            continue  # no vertex inside: no tet
+        if lowest >= 0:
+            for i in range(4):  # no vertex outside: copied, touched if a vertex is warped
                 out[k, i] = tets[t, i]
-            touched[k] = False
+            touched[k] = lowest == 0
             continue
         cut = _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, out, k, scratch)
         if cut < 0:
