@@ -454,8 +454,7 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
     to explain it (touching parts).  Returns the last pass's result, or if it lost, the
     best one kept or else the coarsest that no finer pass keeps more than
     (coarsest_keeping_as_much), its report noting the steps (notes first) and warning of what
-    it lost.  ParoctError if
-    it keeps less than half the solid or has no tets."""
+    it lost.  ParoctError if it keeps less than half the solid or has no tets."""
     h = field.size
     band, memory_bound, tried = h, False, list[float]()  # tried: whole-band sizes below h that a pass lost at
     best: tuple | None = None  # the whole-band pass whose boundary is nearest the input's so far
@@ -563,8 +562,7 @@ def losing_pass(band: float, result: MeshResult, lost: str, advice: str, report:
     """The LosingPass of a pass at boundary size band, holding its result if keep (a mesh
     held through the finer passes adds to their peak)."""
     faces = result.boundary_faces
-    points = None if faces is None else np.compress(used_vertices(faces, result.mesh.points.shape[0]),
-                                                    result.mesh.points, axis=0)
+    points = None if faces is None else boundary_points(result.mesh.points, faces)
     return LosingPass(band, lost, advice, report, points, result if keep else None)
 
 
@@ -1230,11 +1228,7 @@ def _finish(points: np.ndarray, out_tets: np.ndarray, inside: np.ndarray, target
     stages.done("repair")
 
     _measure(points, out_tets, core, boundary, report)
-    # A kernel marks the boundary's points: numpy's scatter of True at faces.ravel() took 4 ms
-    # of tray_bottom's boundary at diag/40; compress is 3x points[mask].
-    boundary_points = np.compress(used_vertices(faces_out, points.shape[0]), points, axis=0)
-    report.missed_vertices, report.missed_faces = boundary_misses(surface, boundary_points, size)
-    del boundary_points
+    report.missed_vertices, report.missed_faces = boundary_misses(surface, boundary_points(points, faces_out), size)
     points, out_tets, new_id = _compact(points, out_tets)
     point_faces = _point_faces(targets, cut_faces, new_id, points.shape[0])
     mesh = TetMesh(points, out_tets)
@@ -1275,6 +1269,13 @@ def _point_faces(targets, cut_faces, new_id, n_points):
 #: edges by well under one size, so only dropped parts (rods, fins, shells thinner than the
 #: lattice) and filled gaps reach this.
 MISS_REACH = 3.0
+
+
+def boundary_points(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The points (B, 3) of the vertices that the boundary faces (F, 3) use, in id order.  A
+    kernel marks them: numpy's scatter of True at faces.ravel() took 4 ms of tray_bottom's
+    boundary at diag/40; compress is 3x points[mask]."""
+    return np.compress(used_vertices(faces, points.shape[0]), points, axis=0)
 
 
 def boundary_misses(surface: Surface, boundary_points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
