@@ -58,9 +58,16 @@ def _source(rev: str | None, tmp: Path) -> Path:
     if rev is None:
         return ROOT / "src"
     tree = tmp / rev.replace("/", "_")
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(tree), rev], check=True,
-                   capture_output=True)
+    done = subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(tree), rev],
+                          capture_output=True, text=True)
+    if done.returncode:
+        sys.exit(f"ab_time.py: cannot check out {rev!r}: {_last_line(done.stderr)}")
     return tree / "src"
+
+
+def _last_line(text: str) -> str:
+    lines = text.strip().splitlines()
+    return lines[-1] if lines else "(no message)"
 
 
 def _run(src: Path, folder: str, divisions: list[float], repeat: int, models: list[str]) -> dict:
@@ -68,7 +75,9 @@ def _run(src: Path, folder: str, divisions: list[float], repeat: int, models: li
     env = dict(os.environ, PYTHONPATH=str(src))
     command = [sys.executable, __file__, "--child", "--folder", folder, "--repeat", str(repeat),
                "--divisions", *map(str, divisions), "--models", *models]
-    done = subprocess.run(command, env=env, check=True, capture_output=True, text=True)
+    done = subprocess.run(command, env=env, capture_output=True, text=True)
+    if done.returncode:
+        sys.exit(f"ab_time.py: the child timing {src} failed: {_last_line(done.stderr)}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -94,8 +103,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.old is None:
         parser.error("give the old revision")
     with tempfile.TemporaryDirectory() as tmp:
-        sources = {"old": _source(args.old, Path(tmp)), "new": _source(args.new, Path(tmp))}
+        sources: dict[str, Path] = {}
         try:
+            sources["old"] = _source(args.old, Path(tmp))
+            sources["new"] = _source(args.new, Path(tmp))
             for src in sources.values():  # fill each version's numba cache outside the timed rounds
                 _run(src, args.folder, [10.0], 1, models[:1])
             best: dict[str, dict] = {"old": {}, "new": {}}
@@ -104,11 +115,11 @@ def main(argv: list[str] | None = None) -> int:
                     for key, (seconds, tets) in _run(src, args.folder, args.divisions, args.repeat, models).items():
                         previous = best[version].get(key)
                         best[version][key] = [min(seconds, previous[0]) if previous else seconds, tets]
-        finally:
-            for version, rev in (("old", args.old), ("new", args.new)):
-                if rev is not None:
-                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
-                                    str(sources[version].parent)], capture_output=True)
+        finally:  # the worktrees made (the working tree's src is not one)
+            for src in sources.values():
+                if src != ROOT / "src":
+                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(src.parent)],
+                                   capture_output=True)
     print(f"{'model':24s} {'old ms':>9s} {'new ms':>9s} {'new/old':>8s}")
     ratios: dict[str, list[float]] = {}
     for key in best["old"]:
