@@ -107,8 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             sources["old"] = _source(args.old, Path(tmp))
             sources["new"] = _source(args.new, Path(tmp))
-            for src in sources.values():  # fill each version's numba cache outside the timed rounds
-                _run(src, args.folder, [10.0], 1, models[:1])
+            # Fill each version's numba cache outside the timed rounds, on a mesh the rounds make
+            # (at diag/10 a thin part, round_rod, is thinner than any size it may refine to).
+            for src in sources.values():
+                _run(src, args.folder, args.divisions[:1], 1, models[:1])
             best: dict[str, dict] = {"old": {}, "new": {}}
             for _ in range(args.rounds):
                 for version, src in sources.items():
