@@ -75,6 +75,25 @@ def test_keep_rows_is_compress_in_place(n, dropped):
 
 
 @pytest.mark.parametrize("seed", range(4))
+def test_ranks_in_orders_are_lexsorts_of_the_signed_coordinates(seed):
+    """Each order's ranks are numpy's lexsort of sign * the coordinates in its axes order
+    (equal points by id), on points with many equal coordinates and repeated points, over
+    every point or only the used ones (the others rank 0)."""
+    rng = np.random.default_rng(seed)
+    points = rng.integers(-2, 3, size=(200, 3)).astype(np.float64)
+    points[rng.integers(200, size=30)] = points[rng.integers(200, size=30)]
+    points[rng.integers(200, size=10)] *= -1.0  # -0.0 equals 0.0
+    used = np.flatnonzero(rng.random(200) < 0.6)
+    for chosen in (None, used):
+        ranks = repair._ranks_in_orders(points, chosen)
+        ids = np.arange(200) if chosen is None else chosen
+        for (axes, sign), rank in zip(repair.PINCH_ORDERS, ranks):
+            want = np.zeros(200, dtype=np.int64)
+            want[ids[np.lexsort((sign * points[ids][:, list(axes)]).T[::-1])]] = np.arange(ids.size)
+            assert np.array_equal(rank, want)
+
+
+@pytest.mark.parametrize("seed", range(4))
 def test_star_partners_match_a_pairwise_twin(seed):
     """Face partners in the stars of a pinched block's vertices, and of random parts of them
     (tets dropped, order shuffled), against every pair compared."""
@@ -165,7 +184,7 @@ def _best_order_twin(tets, bad, points, within=None):
         rank[np.lexsort((sign * points[:, list(axes)]).T[::-1])] = np.arange(len(points))
         checked: set = set()
         alive = naive.repair_pinches(tets, bad, rank, checked)
-        volume = sum(abs(naive._det3(points[t[1:]] - points[t[0]])) for t in tets[~alive]) / 6  # as repair._volume
+        volume = sum(abs(naive._det3(points[t[1:]] - points[t[0]])) for t in tets[~alive]) / 6  # as repair._removed_volumes
         if (within is None or checked <= within) and (best is None or volume < best[0]):
             best = (volume, alive)
     return None if best is None else best[1]
