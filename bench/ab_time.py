@@ -1,17 +1,21 @@
 """Time two versions of paroct against each other, alternating, on the same models.
 
-    python bench/ab_time.py OLD_REV [NEW_REV] [--divisions 40 80] [--models bunny ...] [--rounds 3]
+    python bench/ab_time.py OLD_REV [NEW_REV] [--divisions 40 80] [--models bunny ...] [--rounds 4]
 
 OLD_REV and NEW_REV are git revisions of this repository (NEW_REV default: the working
 tree).  Each is checked out into a temporary worktree (the working tree is used as it is),
 and a child process per round and version imports that version's paroct (PYTHONPATH), loads
 its kernels (compare.warm_up_paroct, its numba cache filled by a first child) and times
 mesh() warm on every model and size, fastest of ``repeat`` calls.  The rounds alternate old
-and new, so that what the machine does meanwhile weighs on both alike: between compare.py
+and new, each round the other first, so that neither always runs right after the other, and
+what the machine does meanwhile weighs on both alike: between compare.py
 runs an hour apart TetGen's median time per model moved by 19 % and paroct's small parts by
 10 % (session 50), more than most changes gain.  Prints per model the fastest of all rounds
 for each version and new / old, then the median of new / old per size.  The tets must be
 the same or the row says so: a change meant to keep the meshes is checked on the way.
+Calibrate on a noisy day with the same code twice (two names of one commit): in session 51
+such runs gave new / old 0.86-0.92 over armadillo and bunny, 4 rounds of 2 calls, and one
+child's bunny at diag/80 took 36-56 ms; a change smaller than that spread needs more rounds.
 """
 
 from __future__ import annotations
@@ -88,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--folder", default=str(CORPUS))
     parser.add_argument("--models", nargs="+", default=None, help="file names in folder (default: all)")
     parser.add_argument("--divisions", nargs="+", type=float, default=[40.0, 80.0])
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=4)
     parser.add_argument("--repeat", type=int, default=3, help="calls per model and size in a child")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -112,8 +116,10 @@ def main(argv: list[str] | None = None) -> int:
             for src in sources.values():
                 _run(src, args.folder, args.divisions[:1], 1, models[:1])
             best: dict[str, dict] = {"old": {}, "new": {}}
-            for _ in range(args.rounds):
-                for version, src in sources.items():
+            for round_ in range(args.rounds):
+                # Each round swaps which version goes first.
+                for version in ("old", "new") if round_ % 2 == 0 else ("new", "old"):
+                    src = sources[version]
                     for key, (seconds, tets) in _run(src, args.folder, args.divisions, args.repeat, models).items():
                         previous = best[version].get(key)
                         best[version][key] = [min(seconds, previous[0]) if previous else seconds, tets]
