@@ -16,6 +16,7 @@ from typing import Iterator
 import numba as nb
 import numpy as np
 
+from .rays import _orient3d
 from .topology import TET_FACES as _FACES
 from .topology import (SurfaceTopology, _sort3, keep_rows, local_vertex_ids, match_faces, nonmanifold_of_fans,
                        surface_topology, touching, union, used_vertices, vertex_fans)
@@ -612,14 +613,9 @@ def _removed_volumes(points, tets, alive):
         for t in range(tets.shape[0]):
             if alive[o, t]:
                 continue
-            a = tets[t, 0]
-            bx, by, bz = points[tets[t, 1], 0] - points[a, 0], points[tets[t, 1], 1] - points[a, 1], \
-                points[tets[t, 1], 2] - points[a, 2]
-            cx, cy, cz = points[tets[t, 2], 0] - points[a, 0], points[tets[t, 2], 1] - points[a, 1], \
-                points[tets[t, 2], 2] - points[a, 2]
-            dx, dy, dz = points[tets[t, 3], 0] - points[a, 0], points[tets[t, 3], 1] - points[a, 1], \
-                points[tets[t, 3], 2] - points[a, 2]
-            total += abs(bx * (cy * dz - cz * dy) + by * (cz * dx - cx * dz) + bz * (cx * dy - cy * dx))
+            a, b, c, d = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
+            total += abs(_orient3d(points[a, 0], points[a, 1], points[a, 2], points[b, 0], points[b, 1], points[b, 2],
+                                   points[c, 0], points[c, 1], points[c, 2], points[d, 0], points[d, 1], points[d, 2]))
         volumes[o] = total / 6.0
     return volumes
 
@@ -648,7 +644,7 @@ def _ranks_in_orders(points: np.ndarray, used: np.ndarray | None = None) -> np.n
         position = np.arange(n)
         if sign < 0:  # run r at [starts[r], ends[r]) moves to n - ends[r], its members in turn
             ends = np.append(starts[1:], n)
-            run = np.repeat(np.arange(starts.shape[0]), np.diff(np.append(starts, n)))
+            run = np.repeat(np.arange(starts.shape[0]), ends - starts)
             position = n - ends[run] + (position - starts[run])
         ranked = np.empty(n, dtype=np.int64)
         ranked[order] = position
