@@ -523,7 +523,8 @@ def _least_volume_repair(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray
     does.  mesh_tets: the same tets by mesh ids, points (V, 3) theirs (for the volumes)."""
     best, best_volume = None, np.inf
     in_orders = np.stack([bad[np.argsort(rank[bad], kind="stable")] for rank in ranks])
-    alive, ok = _repairs_in_orders(tets, in_orders, complete.shape[0], complete, ranks)
+    # A cluster's ranks come as a column gather (F order): one layout, one compile of the kernel.
+    alive, ok = _repairs_in_orders(tets, in_orders, complete.shape[0], complete, np.ascontiguousarray(ranks))
     volumes = _removed_volumes(points, np.ascontiguousarray(mesh_tets), alive)
     for kept, stayed, volume in zip(alive, ok, volumes):
         if stayed and volume < best_volume:
