@@ -418,12 +418,13 @@ def _number_corner_vertices(table, bits, anchors, sides, prefix, box_lo, stride,
     corner_ids = np.empty((n, 8), dtype=np.int32)
     # Room for every prefix point and corner (untouched pages cost nothing).
     coords = np.empty((8 * n + prefix.shape[0] + extra, 3), dtype=np.int64)
-    count = 0
-    done = 0
+    # np.int64, not 0: a literal 0 passed on would compile each callee once more (Literal[int](0)).
+    count = np.int64(0)
+    done = np.int64(0)
     while done < prefix.shape[0]:
         table, bits = _with_room(table, bits, count + 1)
         done, count = _number_points(table, bits, stride, box_lo, directory, prefix, done, coords, count)
-    done = 0
+    done = np.int64(0)
     while done < n:
         table, bits = _with_room(table, bits, count + 8)
         done, count = _number_corners(table, bits, stride, box_lo, directory, anchors, sides, done, corner_ids,
@@ -438,7 +439,7 @@ def _number_asked_face_centres(table, bits, stride, box_lo, directory, anchors, 
     eager, then of the others, each in leaf order; returns (table, bits, the vertices'
     coordinates (V, 3): a view of coords)."""
     for phase in range(2):
-        done = 0
+        done = np.int64(0)  # not 0: see _number_corner_vertices
         while done < coarse.shape[0]:
             table, bits = _with_room(table, bits, count + 6)
             done, count = _add_face_centres(table, bits, stride, box_lo, directory, anchors, sides, split_offsets,
