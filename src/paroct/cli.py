@@ -216,9 +216,16 @@ def console_main() -> int:
     needed.  Asleep, 37-39 ms each; alone, 7 % slower than spinning, a fraction of the
     program's start.  Set here, before numba first starts its threads; the library leaves
     its host process's settings alone (README: several runs at once)."""
+    let_idle_threads_sleep()
+    return main()
+
+
+def let_idle_threads_sleep() -> None:
+    """Ask OpenMP to let idle threads sleep (OMP_WAIT_POLICY=PASSIVE) unless the environment
+    already sets the policy or GOMP_SPINCOUNT; effective only before numba first starts its
+    threads.  For processes sharing the cores: the program, and the tests' xdist workers."""
     if "GOMP_SPINCOUNT" not in os.environ:
         os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    return main()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
