@@ -307,7 +307,7 @@ def _mesh_and_write(args: argparse.Namespace, source: Path, out: Path, patch_siz
         _err(f"{stage} done")
 
     if not args.quiet and not _kernels_cached():
-        _err("compiling the numba kernels on this first run (about a minute on 2 cores; cached afterwards)")
+        _err("compiling the numba kernels on this first run (2 to 3 minutes on 2 cores; cached afterwards)")
     memory_start = start_peak_count() if args.verbose else None
     t0 = time.perf_counter()
     regions: list[Box | Sphere] = [Box(lo=tuple(b[:3]), hi=tuple(b[3:6]), size=b[6]) for b in args.refine_box]
