@@ -18,7 +18,7 @@ import numpy as np
 
 from .rays import _orient3d
 from .topology import TET_FACES as _FACES
-from .topology import (SurfaceTopology, _sort3, keep_rows, local_vertex_ids, match_faces, nonmanifold_of_fans,
+from .topology import (SurfaceTopology, _sort3, int32_ids, keep_rows, local_vertex_ids, match_faces, nonmanifold_of_fans,
                        surface_topology, touching, union, used_vertices, vertex_fans)
 
 
@@ -462,6 +462,7 @@ def local_repair(tets: np.ndarray, bad: np.ndarray, n_vertices: int, rings: int 
     PINCH_ORDERS that removes the least volume in all.  Without points, in the order of the
     ids.  A run on part of the mesh and on the whole give the same.
     """
+    tets = int32_ids(tets)
     sub_ids, region = pinch_neighbourhood(tets, bad, n_vertices, rings)
     sub = np.take(tets, sub_ids, axis=0)
     if points is None:
@@ -505,6 +506,7 @@ def repair_near_pinches(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray,
     (points (K, 3)), and of the orders whose worklist stays within the vertices whose star is
     complete there (complete (K,) bool: pinch_neighbourhood's region) the one that removes
     the least volume is kept (ties: the first)."""
+    tets = int32_ids(tets)  # local ids from np.unique's inverse come as int64
     ranks = _ranks_in_orders(points)
     kept_all = np.ones(tets.shape[0], dtype=bool)
     for rows, vertices, cluster_tets, members in _clusters(tets, bad):

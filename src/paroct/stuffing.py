@@ -26,7 +26,7 @@ import numpy as np
 
 from .frame import LATTICE_TO_SPACE
 from .quality import _COS_HI, _COS_LO, _RATIO, _degrees, _degrees_above, _degrees_below, _gather, _measure_block
-from .topology import touching
+from .topology import int32_ids, touching
 
 ALPHA_LONG = 0.24999
 ALPHA_SHORT = 0.41189
@@ -93,7 +93,7 @@ def collect_cut_edges(tets, inside, coords):
         raise ValueError(f"collect_cut_edges chains hold int32: at most 2**31 vertices and 2**29 tets, "
                          f"len(coords) = {coords.shape[0]}, len(tets) = {tets.shape[0]}")
     n_chunks = 1 if tets.shape[0] < PARALLEL_CUT_EDGE_TETS else nb.get_num_threads()
-    lower, upper, chain, head = _chain_cut_edges(tets, inside, coords.shape[0], n_chunks)
+    lower, upper, chain, head = _chain_cut_edges(int32_ids(tets), inside, coords.shape[0], n_chunks)
     starts, ends, dirs = _oriented_edges(lower, upper, coords)
     return starts, ends, dirs, head, upper, chain
 
@@ -774,7 +774,7 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     there are none), which the quad rule on template faces puts last (_quad_first_diagonal).
     """
     points, signs = _warped(lattice_points, inside, cuts, targets)
-    out, offsets = _stencils_of(points, lattice_points, coords, np.ascontiguousarray(tets), signs, cuts, flat_ok,
+    out, offsets = _stencils_of(points, lattice_points, coords, int32_ids(tets), signs, cuts, flat_ok,
                                 _first_centre(first_centre, lattice_points))
     return points, out, offsets
 
@@ -820,7 +820,7 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     and offsets as stuff with new_targets; again: the indices (ascending) of the tets stuffed
     again, whose flags are 0, the others' kept.
     """
-    tets = np.ascontiguousarray(tets)
+    tets = int32_ids(tets)
     if offsets.shape[0] != tets.shape[0] + 1 or offsets[-1] != out.shape[0]:
         raise ValueError(f"len(offsets) = {offsets.shape[0]} ending at {offsets[-1]}, but {tets.shape[0]} lattice tets "
                          f"stuffed into len(out) = {out.shape[0]}")
@@ -1172,7 +1172,7 @@ def retarget_warps(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndar
     restuff's rows); the caller stuffs again and measures: this is a search, it certifies
     nothing.
     """
-    tets = np.ascontiguousarray(tets)
+    tets = int32_ids(tets)
     vertices = _bad_tet_vertices(tets, offsets, bad)
     if settled is not None and np.isin(vertices, settled).all():
         return Retargeted(targets, 0, np.empty(0, dtype=np.int64), vertices, True)

@@ -15,6 +15,17 @@ import numpy as np
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 
 
+def int32_ids(ids: np.ndarray) -> np.ndarray:
+    """Vertex ids (tets (M, 4), faces, ...) as the C-contiguous int32 array the kernels are
+    compiled for (the mesher's tets are int32; no copy then): one specialization of each kernel,
+    whatever integers a caller passes (int64 tets from tests and from np.unique's inverse
+    compiled stuffing's and the pinch repair's kernels a second time, about 36 s of a cold test
+    suite).  ValueError if an id does not fit in int32."""
+    if ids.dtype != np.int32 and ids.size and not (-2**31 <= ids.min() and ids.max() < 2**31):
+        raise ValueError(f"ids {ids.min()}..{ids.max()} do not fit in int32")
+    return np.ascontiguousarray(ids, dtype=np.int32)
+
+
 @nb.njit(cache=True, inline="always")
 def _sort3(a, b, c):
     if a > b:
