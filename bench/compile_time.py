@@ -1,11 +1,14 @@
 """Where numba's cold compile time goes: seconds per function, with an empty cache.
 
-    python bench/compile_time.py [--top 25] [--tests [PYTEST_ARGS ...]]
+    python bench/compile_time.py [--top 25] [--tests [PYTEST_ARGS ...] | --mesh SURFACE]
 
 By default a child process with a fresh, temporary NUMBA_CACHE_DIR meshes
 compare.warm_up_paroct's parts, which take every path of the mesher. With ``--tests`` it runs
 pytest instead, in one process (`-p no:xdist`), over the arguments given (default: tests),
-which is what a fresh clone's CI compiles.  A listener on numba's ``numba:compile`` events
+which is what a fresh clone's CI compiles.  With ``--mesh`` it runs the program,
+``paroct mesh SURFACE -q`` (the output in the temporary folder): what a user's first
+run compiles, such as the README's (``--mesh data/angle_block.stl``; 150 s in 121 functions
+in session 53).  A listener on numba's ``numba:compile`` events
 times each compile. A function's *exclusive* seconds leave out the compiles of the callees
 it set off (numba compiles a called kernel inside its caller's compile). The script prints:
 
@@ -65,8 +68,11 @@ atexit.register(lambda: json.dump(_rows, open(_OUT, "w")))
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--top", type=int, default=25, help="functions listed by exclusive seconds")
-    parser.add_argument("--tests", nargs="*", default=None, metavar="PYTEST_ARG",
-                        help="compile what pytest runs (default arguments: tests) instead of the warm-up meshes")
+    what = parser.add_mutually_exclusive_group()
+    what.add_argument("--tests", nargs="*", default=None, metavar="PYTEST_ARG",
+                      help="compile what pytest runs (default arguments: tests) instead of the warm-up meshes")
+    what.add_argument("--mesh", default=None, metavar="SURFACE",
+                      help="compile what `paroct mesh SURFACE -q` runs (SURFACE relative to the repository)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(scratch) / "compiles.json"
@@ -74,7 +80,11 @@ def main(argv: list[str] | None = None) -> int:
         recorder.write_text(_RECORDER.replace("__OUT__", repr(str(out))))
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(scratch) / "cache"),
                    PYTHONPATH=os.pathsep.join([scratch, str(HERE), os.environ.get("PYTHONPATH", "")]))
-        if args.tests is None:
+        if args.mesh is not None:
+            program = (f"import compile_recorder, sys; from paroct.cli import main; "
+                       f"sys.exit(main(['mesh', {args.mesh!r}, '-q', '-o', {str(Path(scratch) / 'first.vtu')!r}]))")
+            command = [sys.executable, "-c", program]
+        elif args.tests is None:
             command = [sys.executable, "-c", "import compile_recorder, compare; compare.warm_up_paroct()"]
         else:
             command = [sys.executable, "-m", "pytest", "-q", "-p", "no:xdist", "-p", "no:cacheprovider",
