@@ -18,7 +18,7 @@ from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _move_kept,
                               _place_again, _retarget, _row_shifts, _shift_offsets, _signs, _star_options, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
                               collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
-from paroct.topology import match_faces, touching
+from paroct.topology import int32_ids, match_faces, touching
 
 from .naive import cut_edges as naive_cut_edges
 from .naive import group_by_vertex as naive_group_by_vertex
@@ -294,6 +294,22 @@ def test_stuff_orients_by_the_volume_before_the_warps():
     folded = tet_quality(points, out).volume <= 0
     assert folded.any() and np.all(np.any(out[folded] == v, axis=1))
 
+
+
+def test_stuff_gives_the_same_for_int32_and_int64_tets():
+    """stuff and collect_cut_edges take any integer tets (topology.int32_ids: one int32
+    specialization of their kernels); ids beyond int32 are refused, not wrapped."""
+    n = 5
+    anchors = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    coords, tets = lattice.leaf_tets(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    phi, fracs = _plane(coords, np.array([0.0, 0.0, 1.0]), float((coords @ LATTICE_TO_SPACE.T)[:, 2].mean()) + 0.1)
+    got = [_stuff(coords, tets.astype(dtype), phi, fracs, warp=True) for dtype in (np.int32, np.int64)]
+    assert np.array_equal(got[0][1], got[1][1]) and np.array_equal(got[0][2], got[1][2]) and got[0][2].shape[0] > 0
+    same = np.ascontiguousarray(tets, dtype=np.int32)
+    assert int32_ids(same) is same
+    assert int32_ids(np.array([[0, 1, 2, 2**31 - 1]])).dtype == np.int32
+    with pytest.raises(ValueError, match="do not fit in int32"):
+        int32_ids(np.array([[0, 1, 2, 2**31]]))
 
 @pytest.mark.parametrize("seed", range(4))
 def test_star_score_is_the_worst_violation_of_the_stuffed_star(seed):
