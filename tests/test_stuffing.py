@@ -295,7 +295,6 @@ def test_stuff_orients_by_the_volume_before_the_warps():
     assert folded.any() and np.all(np.any(out[folded] == v, axis=1))
 
 
-
 def test_stuff_gives_the_same_for_int32_and_int64_tets():
     """stuff and collect_cut_edges take any integer tets (topology.int32_ids: one int32
     specialization of their kernels); ids beyond int32 are refused, not wrapped."""
@@ -310,6 +309,7 @@ def test_stuff_gives_the_same_for_int32_and_int64_tets():
     assert int32_ids(np.array([[0, 1, 2, 2**31 - 1]])).dtype == np.int32
     with pytest.raises(ValueError, match="do not fit in int32"):
         int32_ids(np.array([[0, 1, 2, 2**31]]))
+
 
 @pytest.mark.parametrize("seed", range(4))
 def test_star_score_is_the_worst_violation_of_the_stuffed_star(seed):
