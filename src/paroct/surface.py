@@ -219,16 +219,23 @@ def _weld_kernel(vertices, bits, faces):
 @nb.njit(cache=True)
 def bounding_box(vertices):
     """Corners (3,) of the box of vertices (V >= 1, 3) and the largest coordinate magnitude:
-    one pass (numpy's reductions along axis 0 of an (V, 3) array stride, 30 ns a vertex)."""
-    lo = vertices[0].copy()
-    hi = vertices[0].copy()
+    one pass (numpy's reductions along axis 0 of an (V, 3) array stride, 30 ns a vertex).
+    The extremes are held in scalars and updated by selects, not by branches into (3,)
+    arrays: 2 ms -> 1.2 ms on 600 k points, the same result (a NaN coordinate after the first
+    vertex is never taken; the first vertex's stays)."""
+    lo0 = hi0 = vertices[0, 0]
+    lo1 = hi1 = vertices[0, 1]
+    lo2 = hi2 = vertices[0, 2]
     for v in range(1, vertices.shape[0]):
-        for i in range(3):
-            x = vertices[v, i]
-            if x < lo[i]:
-                lo[i] = x
-            if x > hi[i]:
-                hi[i] = x
+        x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+        lo0 = x if x < lo0 else lo0
+        hi0 = x if x > hi0 else hi0
+        lo1 = y if y < lo1 else lo1
+        hi1 = y if y > hi1 else hi1
+        lo2 = z if z < lo2 else lo2
+        hi2 = z if z > hi2 else hi2
+    lo = np.array([lo0, lo1, lo2])
+    hi = np.array([hi0, hi1, hi2])
     largest = 0.0
     for i in range(3):
         largest = max(largest, abs(lo[i]), abs(hi[i]))
