@@ -112,6 +112,28 @@ def test_random_balanced_trees_conform_with_template_quality(seed, rule, min_ang
     assert np.isclose(q.radius_ratio, FAT_RATIO, atol=1e-9).sum() >= 6 * plain.sum()
 
 
+@pytest.mark.parametrize("marking", ["random", "none", "all", "ends_unmarked"])
+@pytest.mark.parametrize("seed", range(4))
+def test_marked_tets_are_the_tets_with_a_marked_vertex_in_order(seed, marking):
+    """graded_tets(vertices, marked) keeps exactly the tets of graded_tets(vertices) with a
+    marked vertex, in their order: plain leaves (six fat tets, read straight from their
+    corners) and split leaves (templates) alike, also with both ends of every chain
+    (corners 0 and 7) unmarked."""
+    anchors, sides = _random_balanced_tree(700 + seed, 3 + seed % 3)
+    vertices = lattice.number_vertices(anchors, sides, eager=_eager_leaves("mixed", len(sides), seed))
+    everything = lattice.graded_tets(vertices)
+    rng = np.random.default_rng(seed)
+    n = vertices.coords.shape[0]
+    marked = {"random": rng.random(n) < 0.3, "none": np.zeros(n, dtype=bool), "all": np.ones(n, dtype=bool)}.get(marking)
+    if marking == "ends_unmarked":
+        marked = rng.random(n) < 0.5
+        marked[vertices.corner_ids[:, [0, 7]]] = False
+    assert (sides == 1).any() and (sides >= 2).any()
+    want = everything[marked[everything].any(axis=1)]
+    assert len(want) < len(everything) or marking == "all"
+    assert np.array_equal(lattice.graded_tets(vertices, marked), want)
+
+
 @pytest.mark.parametrize("rule", ["minimal", "eager", "mixed"])
 @pytest.mark.parametrize("seed", range(6))
 def test_vertex_ids_follow_the_numbering_order(seed, rule):
