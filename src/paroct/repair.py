@@ -525,8 +525,10 @@ def _least_volume_repair(tets: np.ndarray, bad: np.ndarray, complete: np.ndarray
     does.  mesh_tets: the same tets by mesh ids, points (V, 3) theirs (for the volumes)."""
     best, best_volume = None, np.inf
     in_orders = np.stack([bad[np.argsort(rank[bad], kind="stable")] for rank in ranks])
-    # A cluster's ranks come as a column gather (F order): one layout, one compile of the kernel.
-    alive, ok = _repairs_in_orders(tets, in_orders, complete.shape[0], complete, np.ascontiguousarray(ranks))
+    # A cluster's ranks come as a column gather (F order), its tets as int64 (_clusters): one
+    # layout, one type, one compile of the kernel for clusters and the whole mesh (int32).
+    alive, ok = _repairs_in_orders(int32_ids(tets), in_orders, complete.shape[0], complete,
+                                   np.ascontiguousarray(ranks))
     volumes = _removed_volumes(points, np.ascontiguousarray(mesh_tets), alive)
     for kept, stayed, volume in zip(alive, ok, volumes):
         if stayed and volume < best_volume:
