@@ -121,13 +121,16 @@ def warm_up_paroct() -> None:
     """Mesh small parts on every path of paroct once: graded, uniform, pinch repair (angle_block
     at diag/35, then moved onto its sharp edges), a thin plate that takes the thin-feature path,
     a block with a thin fin whose rounds near it change the band's level and mend warps (the
-    halving tried first keeps bunny and the plate off that path), and a slanted rod, whose box
+    halving tried first keeps bunny and the plate off that path), a slanted rod, whose box
     is so empty that its vertices are numbered through a brick directory (without it,
-    fea_part's first call loaded those kernels inside the timed call).  Run in a process of its
-    own before all children, it fills the numba cache (a fresh checkout has none, and a
-    compile inside a child would count against its time limit); run in each paroct child
-    before the timed call, it loads every kernel, as a long-lived process has them.
-    tests/test_kernels.py meshes the same parts to check that no kernel compiles twice."""
+    fea_part's first call loaded those kernels inside the timed call), and two small cubes at
+    opposite corners of their box, whose crossings lie thinly in the box of their rows (the
+    row sort's comparison path: without them tray_bottom's timed call loaded its kernel from
+    the cache, 6 ms).  Run in a process of its own before all children, it fills the numba
+    cache (a fresh checkout has none, and a compile inside a child would count against its
+    time limit); run in each paroct child before the timed call, it loads every kernel, as a
+    long-lived process has them.  tests/test_kernels.py meshes the same parts to check that
+    no kernel compiles twice."""
     import manifold3d
 
     import paroct
@@ -140,6 +143,8 @@ def warm_up_paroct() -> None:
     paroct.mesh(manifold3d.Manifold.cube([1.0, 1.0, 0.5]) + fin, size=0.1)
     paroct.mesh(manifold3d.Manifold.cylinder(1.0, 0.05, 0.05, 16).rotate([0, 54.7356, 45]), size=0.02,
                 thin_features=False)
+    corner = manifold3d.Manifold.cube([0.1, 0.1, 0.1])
+    paroct.mesh(corner + corner.translate([0.9, 0.9, 0.9]), size=0.014)
 
 
 def _memory_baseline() -> tuple[int, bool]:
