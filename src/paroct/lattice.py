@@ -496,9 +496,9 @@ def _leaf_tets(corner_ids, split_row, split_ids, marked, chains, chain_odd, chai
     """Tets of every leaf, chain by chain from the transition templates, keeping those with a
     marked vertex (count, prefix sum, fill); -1 rows mark a mask without template.  A leaf
     without split points gives its six fat tets (template 0 of each chain) with a marked
-    vertex straight from its corners: on a band's outer cells, whose corners 0 and 7 are both
-    unmarked (9 k of bunny's 31 k leaves at diag/80), the templates' path took 1.5 ms of
-    2.3."""
+    vertex straight from its corners, also where its corners 0 and 7 are both unmarked (a
+    band's outer cells, 9 k of bunny's 31 k leaves at diag/80, took the templates' path:
+    this kernel 2.3 -> 1.6 ms there)."""
     n = corner_ids.shape[0]
     counts = np.zeros(n + 1, dtype=np.int64)
     bad = np.zeros(n, dtype=np.bool_)
