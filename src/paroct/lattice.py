@@ -504,11 +504,10 @@ def _leaf_tets(corner_ids, split_row, split_ids, marked, chains, chain_odd, chai
     bad = np.zeros(n, dtype=np.bool_)
     for i in nb.prange(n):
         if split_row[i] < 0:
-            k = 6
-            if not (marked[corner_ids[i, 0]] or marked[corner_ids[i, 7]]):
-                k = 0
-                for c in range(6):
-                    k += _fat_tet_kept(corner_ids, i, chains, c, marked, False)
+            ends_marked = marked[corner_ids[i, 0]] or marked[corner_ids[i, 7]]
+            k = 0
+            for c in range(6):  # the fat tets kept, as the fill below
+                k += _fat_tet_kept(corner_ids, i, chains, c, marked, ends_marked)
             counts[i + 1] = k
             continue
         labels = np.empty(9, dtype=np.int64)
