@@ -15,8 +15,9 @@ from paroct import lattice, stuffing
 from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
-from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, CutEdges, _chain_cut_edges, _group_by_vertex, _move_kept,
-                              _place_again, _retarget, _row_shifts, _shift_offsets, _signs, _star_options, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
+from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, TET_CHUNKS, CutEdges, _chain_cut_edges, _chunk_starts,
+                              _group_by_vertex, _move_kept, _place_again, _retarget, _row_shifts, _shift_offsets, _signs,
+                              _star_options, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
                               collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
 from paroct.topology import int32_ids, match_faces, touching
 
@@ -452,24 +453,37 @@ def test_cut_edges_of_lattices_cut_by_a_sphere(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
-    """The parallel driver hands chunks of lattice tets to the serial kernel: same tets, same
-    touched flags, for every prefix of the lattice tets (down to fewer tets than chunks)."""
+    """The parallel driver hands chunks of lattice tets to the serial kernel, each from the row
+    _chunk_starts gives it (the per-tet offsets at the chunk's first tet): same tets, same
+    touched flags, for every prefix of the lattice tets (down to fewer tets than chunks), and
+    the tets stuff gives, oriented."""
     k = next(k for k in range(20) if _sphere_cuts(seed, k)[3][2].starts.size >= 50)
     coords, tets, _, (x, inside, cuts, targets), first_centre = _sphere_cuts(seed, k)
-    signs = _signs(inside, targets)
+    points, signs = _warped(x, inside, cuts, targets)
     for n in (tets.shape[0], 37, 1):
         part = np.ascontiguousarray(tets[:n])
         offsets = _stencil_offsets(part, signs)
         assert offsets.shape == (n + 1,) and offsets[0] == 0 and (np.diff(offsets) >= 0).all()
+        n_chunks = min(n, TET_CHUNKS)
+        starts = _chunk_starts(part, signs, n_chunks)
+        assert np.array_equal(starts, offsets[np.arange(n_chunks + 1) * n // n_chunks])
         outputs = []
-        for kernel in (_stencils, _stencils_in_chunks):
+        for kernel, start in ((_stencils, 0), (_stencils_in_chunks, starts)):
             out = np.full((int(offsets[-1]), 4), -1, dtype=np.int32)
             touched = np.zeros(out.shape[0], dtype=np.bool_)
-            assert kernel(part, signs, coords, first_centre, cuts.table, coords.shape[0], PRISM_TETS, offsets, out,
+            assert kernel(part, signs, coords, first_centre, cuts.table, coords.shape[0], PRISM_TETS, start, out,
                           touched) == 0
             outputs.append((out, touched))
         assert np.array_equal(outputs[0][0], outputs[1][0]) and np.array_equal(outputs[0][1], outputs[1][1])
         assert (outputs[0][0] >= 0).all()
+        # stuff gives these tets, each oriented (positive after the warps); the untouched ones
+        # are the lattice tets, as they were.
+        stuffed = stuff(x, coords, part, inside, cuts, targets, first_centre=first_centre, with_offsets=False)[1]
+        assert (tet_quality(points, stuffed).volume > 0).all()
+        assert np.array_equal(np.sort(stuffed, axis=1), np.sort(outputs[0][0], axis=1))
+        lattice_of = np.repeat(np.arange(n), np.diff(offsets))  # each output row's lattice tet
+        untouched = ~outputs[0][1]
+        assert np.array_equal(outputs[0][0][untouched], part[lattice_of[untouched]])
 
 
 @pytest.mark.parametrize("seed", range(4))

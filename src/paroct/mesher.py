@@ -1015,7 +1015,7 @@ def _mesh_at(surface: Surface, field: SizeField, report: MeshReport,
     del vertices, band, keys, levels
     lattice_points = frame.to_space(coords)
     points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=mend,
-                                      first_centre=first_centre)
+                                      first_centre=first_centre, with_offsets=mend)
     stages.done("stuff")
     if mend:
         points, out_tets, targets, offsets, flags = _mend(lattice_points, coords, first_centre, tets, inside, cuts,

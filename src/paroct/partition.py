@@ -708,7 +708,7 @@ def mesh_range(frame: FatFrame, keys: np.ndarray, levels: np.ndarray, band: Band
     vertices, inside, tets, in_range = _range_lattice_tets(frame, keys, levels, band, first, end, around)
     cuts, cut_at, targets = _range_cuts(band, in_range, vertices.coords, tets, inside)
     points, out_tets, _ = stuff(frame.to_space(vertices.coords), vertices.coords, tets, inside, cuts, targets,
-                                first_centre=vertices.first_centre)
+                                first_centre=vertices.first_centre, with_offsets=False)
     # Only the points the range's tets use: vertices of touching leaves alone may lack the
     # edge they warp onto here, and their own range places them.
     n = vertices.coords.shape[0]

@@ -548,6 +548,19 @@ def _stencil_size(n_p, n_z, n_m):
     return 3  # the prisms: ++-- and +++-
 
 
+@nb.njit(cache=True, inline="always")
+def _tet_stencil_size(tets, t, signs):
+    """Number of tets lattice tet t's stencil emits, from its sign pattern (counts only,
+    without branches: _sign_pattern lists the vertices too)."""
+    n_p = 0
+    n_m = 0
+    for i in range(4):
+        s = signs[tets[t, i]]
+        n_p += s > 0
+        n_m += s < 0
+    return _stencil_size(n_p, 4 - n_p - n_m, n_m)
+
+
 @nb.njit(cache=True, parallel=True)
 def _stencil_offsets(tets, signs):
     """Offsets (T + 1,) int64 of the lattice tets' stencils, each counted from its sign
@@ -559,24 +572,36 @@ def _stencil_offsets(tets, signs):
     n_chunks = min(n, 256)
     for chunk in nb.prange(n_chunks):
         for t in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            n_p = 0
-            n_m = 0
-            for i in range(4):  # counts only, without branches (_sign_pattern lists the vertices too)
-                s = signs[tets[t, i]]
-                n_p += s > 0
-                n_m += s < 0
-            offsets[t + 1] = _stencil_size(n_p, 4 - n_p - n_m, n_m)
+            offsets[t + 1] = _tet_stencil_size(tets, t, signs)
     for t in range(n):
         offsets[t + 1] += offsets[t]
     return offsets
+
+
+@nb.njit(cache=True, parallel=True)
+def _chunk_starts(tets, signs, n_chunks):
+    """starts (n_chunks + 1,) int64: the first output row of each chunk of the lattice tets
+    (chunk c: tets c * T // n_chunks up to the next chunk's), starts[-1] the total; what
+    _stencil_offsets gives at the chunks' first tets, without a row per lattice tet (8 bytes a
+    lattice tet of fresh pages that only mending reads)."""
+    n = tets.shape[0]
+    starts = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in nb.prange(n_chunks):
+        total = 0
+        for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            total += _tet_stencil_size(tets, t, signs)
+        starts[c + 1] = total
+    for c in range(n_chunks):
+        starts[c + 1] += starts[c]
+    return starts
 
 
 @nb.njit(cache=True, inline="always")
 def _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, out, k, scratch):
     """Write the stencil tets of lattice tet t, with two or three vertices inside and one or
     two outside (the quads and prisms; _stencils does the other patterns), from out[k] on;
-    returns 1, or -1 if the quad rule gave a prism cyclic diagonals (which it must never do;
-    the caller raises, as a parallel loop cannot)."""
+    returns how many (2 or 3), or -3 if the quad rule gave a prism cyclic diagonals and none
+    were written (which it must never do; the caller raises, as a parallel loop cannot)."""
     plus = scratch[0]
     zero = scratch[1]
     minus = scratch[2]
@@ -595,7 +620,7 @@ def _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, 
         else:
             _emit(out, k, z, a, b, cae)
             _emit(out, k + 1, z, b, cbe, cae)
-        return 1
+        return 2
     # Prisms: 2 + and 2 -, or 3 + and 1 -, laid out as PRISM_TETS expects.
     if n_p == 2:
         for i in range(2):
@@ -608,26 +633,27 @@ def _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, 
             pv[3 + i] = _cut_id(table, n_lattice, plus[i], minus[0])
     choice = _prism_choice(coords, plus, minus, n_p, prism, first_centre)
     if choice < 0:
-        return -1
+        return -3
     for i in range(3):
         _emit(out, k + i, pv[prism[choice, i, 0]], pv[prism[choice, i, 1]], pv[prism[choice, i, 2]], pv[prism[choice, i, 3]])
-    return 1
+    return 3
 
 
 @nb.njit(cache=True)
-def _stencils(tets, signs, coords, first_centre, table, n_lattice, prism, offsets, out, touched):
-    """Stencil tets of lattice tet t into out[offsets[t]:offsets[t + 1]]; touched[k] is False
-    for output tets that are untouched lattice tets.  Returns the number of lattice tets whose
-    prism came out with cyclic diagonals (must be 0).
+def _stencils(tets, signs, coords, first_centre, table, n_lattice, prism, start, out, touched):
+    """Stencil tets of the lattice tets, in order, into out from row ``start`` on; touched[k]
+    is False for output tets that are untouched lattice tets.  Returns the number of lattice
+    tets whose prism came out with cyclic diagonals (must be 0).
 
     Serial: _stencil_tet must be inlined (called, it cost 140 ns a tet), and inlined into a
     parallel loop it tripled the compile time (34 s).  _stencils_in_chunks runs this kernel on
     chunks in parallel instead: 2.5-3 x faster on two cores (round_rod at diag/80, 4.6 M
-    lattice tets: 237 against 93 ms)."""
+    lattice tets: 237 against 93 ms).  The tets are oriented in a pass of their own (_orient):
+    orienting each here as it is written took plate_holes at diag/80 2.9 against 1.9 ms."""
     cyclic = 0
     scratch = np.empty((4, 6), dtype=np.int64)
+    k = start
     for t in range(tets.shape[0]):
-        k = offsets[t]
         s0, s1, s2, s3 = signs[tets[t, 0]], signs[tets[t, 1]], signs[tets[t, 2]], signs[tets[t, 3]]
         lowest = min(min(s0, s1), min(s2, s3))
         highest = max(max(s0, s1), max(s2, s3))
@@ -640,6 +666,7 @@ def _stencils(tets, signs, coords, first_centre, table, n_lattice, prism, offset
             for i in range(4):  # no vertex outside: copied, touched if a vertex is warped
                 out[k, i] = tets[t, i]
             touched[k] = lowest == 0
+            k += 1
             continue
         if (s0 > 0) + (s1 > 0) + (s2 > 0) + (s3 > 0) == 1:
             # One vertex inside: each outside vertex moves to the cut on its edge to it
@@ -649,53 +676,57 @@ def _stencils(tets, signs, coords, first_centre, table, n_lattice, prism, offset
                 v = tets[t, i]
                 out[k, i] = _cut_id(table, n_lattice, a, v) if signs[v] < 0 else v
             touched[k] = True
+            k += 1
             continue
-        if _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, out, k, scratch) < 0:
+        n = _stencil_tet(t, tets, signs, coords, first_centre, table, n_lattice, prism, out, k, scratch)
+        if n < 0:
             cyclic += 1
-        for i in range(k, offsets[t + 1]):
+            n = -n
+        for i in range(k, k + n):
             touched[i] = True
+        k += n
     return cyclic
 
 
 @nb.njit(cache=True, parallel=True)
-def _stencils_in_chunks(tets, signs, coords, first_centre, table, n_lattice, prism, offsets, out, touched):
-    """_stencils over chunks of the lattice tets in parallel: each chunk writes only its own
-    tets' rows of out (offsets are absolute), so the result is the same.  The serial kernel is
+def _stencils_in_chunks(tets, signs, coords, first_centre, table, n_lattice, prism, starts, out, touched):
+    """_stencils over chunks of the lattice tets in parallel (chunk c: tets c * T // C up to
+    the next chunk's, written from out[starts[c]] on, C = len(starts) - 1: _chunk_starts), each
+    chunk writing only its own rows of out, so the result is the same.  The serial kernel is
     called, not inlined, so the parallel loop compiles in seconds."""
     n = tets.shape[0]
-    n_chunks = min(n, TET_CHUNKS)
+    n_chunks = starts.shape[0] - 1
     cyclic = np.zeros(max(n_chunks, 1), dtype=np.int64)
     for c in nb.prange(n_chunks):
         a = c * n // n_chunks
         b = (c + 1) * n // n_chunks
-        cyclic[c] = _stencils(tets[a:b], signs, coords, first_centre, table, n_lattice, prism, offsets[a:b + 1], out,
-                              touched)
+        cyclic[c] = _stencils(tets[a:b], signs, coords, first_centre, table, n_lattice, prism, starts[c], out, touched)
     return cyclic.sum()
 
 
 @nb.njit(cache=True, inline="always")
-def _position(points, lattice_points, v, reference, i):
-    """Coordinate i of output vertex v: where stuffing put it, or (reference) before the warps,
-    lattice vertices at their lattice points (cut points do not move)."""
-    return lattice_points[v, i] if reference and v < lattice_points.shape[0] else points[v, i]
-
-
-@nb.njit(cache=True, inline="always")
 def _volume6(points, lattice_points, tets, t, reference):
-    """Six times the signed volume of tet t, at the positions _position gives."""
-    p0, p1, p2, p3 = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
-    o0 = _position(points, lattice_points, p0, reference, 0)
-    o1 = _position(points, lattice_points, p0, reference, 1)
-    o2 = _position(points, lattice_points, p0, reference, 2)
-    ax = _position(points, lattice_points, p1, reference, 0) - o0
-    ay = _position(points, lattice_points, p1, reference, 1) - o1
-    az = _position(points, lattice_points, p1, reference, 2) - o2
-    bx = _position(points, lattice_points, p2, reference, 0) - o0
-    by = _position(points, lattice_points, p2, reference, 1) - o1
-    bz = _position(points, lattice_points, p2, reference, 2) - o2
-    cx = _position(points, lattice_points, p3, reference, 0) - o0
-    cy = _position(points, lattice_points, p3, reference, 1) - o1
-    cz = _position(points, lattice_points, p3, reference, 2) - o2
+    """Six times the signed volume of tet t: at points (V + E, 3), where stuffing put its
+    vertices, or (reference) before the warps, its lattice vertices (ids below V) at
+    lattice_points (V, 3) and its cut points (which do not move) at points.
+
+    The array is picked once a vertex, then its row read: picked a coordinate at a time (one
+    choice of two arrays per read), a serial loop such as _star_score's compiled 12-30 x
+    slower than the same body in a parallel one (plate_holes at diag/80, 117 k tets: 17
+    against 0.6 ms)."""
+    n = lattice_points.shape[0] if reference else 0
+    v = tets[t, 0]
+    at = lattice_points if v < n else points
+    o0, o1, o2 = at[v, 0], at[v, 1], at[v, 2]
+    v = tets[t, 1]
+    at = lattice_points if v < n else points
+    ax, ay, az = at[v, 0] - o0, at[v, 1] - o1, at[v, 2] - o2
+    v = tets[t, 2]
+    at = lattice_points if v < n else points
+    bx, by, bz = at[v, 0] - o0, at[v, 1] - o1, at[v, 2] - o2
+    v = tets[t, 3]
+    at = lattice_points if v < n else points
+    cx, cy, cz = at[v, 0] - o0, at[v, 1] - o1, at[v, 2] - o2
     return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
 
 
@@ -757,10 +788,11 @@ def _signs(inside, targets):
 
 
 def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, inside: np.ndarray,
-          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False,
-          first_centre: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          cuts: CutEdges, targets: np.ndarray, *, flat_ok: bool = False, first_centre: int | None = None,
+          with_offsets: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Warp and fill: the stuffed mesh (points (N, 3) float64, tets (M, 4) int32), unused points
-    kept, and offsets (T + 1,) int64: lattice tet t's tets are tets[offsets[t]:offsets[t + 1]].
+    kept, and offsets (T + 1,) int64: lattice tet t's tets are tets[offsets[t]:offsets[t + 1]]
+    (None unless with_offsets: only mending, restuff, reads them).
 
     lattice_points: (V, 3) space positions of the lattice vertices; coords: (V, 3) their
     lattice coordinates; tets: (T, 4) lattice tets; inside: (V,) class of each vertex;
@@ -775,7 +807,7 @@ def stuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, insi
     """
     points, signs = _warped(lattice_points, inside, cuts, targets)
     out, offsets = _stencils_of(points, lattice_points, coords, int32_ids(tets), signs, cuts, flat_ok,
-                                _first_centre(first_centre, lattice_points))
+                                _first_centre(first_centre, lattice_points), with_offsets)
     return points, out, offsets
 
 
@@ -783,15 +815,21 @@ def _first_centre(first_centre: int | None, lattice_points: np.ndarray) -> int:
     return lattice_points.shape[0] if first_centre is None else int(first_centre)
 
 
-def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges,
-                 flat_ok: bool, first_centre: int) -> tuple[np.ndarray, np.ndarray]:
+def _stencils_of(points, lattice_points, coords, tets, signs, cuts: CutEdges, flat_ok: bool, first_centre: int,
+                 with_offsets: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """The stencil tets (M, 4) int32 of the lattice tets (T, 4), in order, oriented (stuff),
-    and offsets (T + 1,): lattice tet t's are out[offsets[t]:offsets[t + 1]]."""
-    offsets = _stencil_offsets(tets, signs)
-    out = np.empty((int(offsets[-1]), 4), dtype=np.int32)
+    and if with_offsets, offsets (T + 1,): lattice tet t's are out[offsets[t]:offsets[t + 1]]
+    (else None)."""
+    n_chunks = min(tets.shape[0], TET_CHUNKS)
+    if with_offsets:
+        offsets = _stencil_offsets(tets, signs)
+        starts = np.take(offsets, np.arange(n_chunks + 1) * tets.shape[0] // max(n_chunks, 1))
+    else:
+        offsets, starts = None, _chunk_starts(tets, signs, n_chunks)
+    out = np.empty((int(starts[-1]), 4), dtype=np.int32)
     touched = np.empty(out.shape[0], dtype=np.bool_)
-    if _stencils_in_chunks(tets, signs, coords, first_centre, cuts.table, lattice_points.shape[0], PRISM_TETS,
-                           offsets, out, touched):
+    if _stencils_in_chunks(tets, signs, coords, first_centre, cuts.table, lattice_points.shape[0], PRISM_TETS, starts,
+                           out, touched):
         raise AssertionError("cyclic prism diagonals: the quad rule must never produce them")
     folded = _orient(points, lattice_points, out, touched)
     if folded and not flat_ok:
@@ -833,7 +871,8 @@ def restuff(lattice_points: np.ndarray, coords: np.ndarray, tets: np.ndarray, in
     if rows is None:
         rows = np.flatnonzero(touching(tets, new_targets != targets))
     again, again_offsets = _stencils_of(points, lattice_points, coords, np.take(tets, rows, axis=0), signs, cuts,
-                                        flat_ok, _first_centre(first_centre, lattice_points))
+                                        flat_ok, _first_centre(first_centre, lattice_points), True)
+    assert again_offsets is not None  # asked for
     shift = _row_shifts(offsets, rows, again_offsets)
     total = int(offsets[-1] + shift[-1])
     if total > out.shape[0]:
@@ -925,14 +964,12 @@ def _star_score(star, tets, signs, points, lattice_points, coords, first_centre,
     Calls _stencils rather than inlining _stencil_tet again, which would cost most of a
     minute of compile time."""
     local = tets[star]
-    offsets = np.zeros(star.shape[0] + 1, dtype=np.int64)
-    scratch = np.empty((3, 4), dtype=np.int64)
+    total = 0
     for t in range(star.shape[0]):
-        n_p, n_z, n_m = _sign_pattern(local, t, signs, scratch[0], scratch[1], scratch[2])
-        offsets[t + 1] = offsets[t] + _stencil_size(n_p, n_z, n_m)
-    out = np.empty((offsets[-1], 4), dtype=np.int32)
+        total += _tet_stencil_size(local, t, signs)
+    out = np.empty((total, 4), dtype=np.int32)
     touched = np.empty(out.shape[0], dtype=np.bool_)
-    if _stencils(local, signs, coords, first_centre, table, lattice_points.shape[0], prism, offsets, out, touched):
+    if _stencils(local, signs, coords, first_centre, table, lattice_points.shape[0], prism, np.int64(0), out, touched):
         return 180.0, 0.0
     worst = 0.0
     thinnest = 1.0
