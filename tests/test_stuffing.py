@@ -16,9 +16,9 @@ from paroct.frame import LATTICE_TO_SPACE
 from paroct.octant import morton_keys
 from paroct.quality import tet_quality
 from paroct.stuffing import (DIHEDRAL_BOUND, PRISM_TETS, TET_CHUNKS, CutEdges, _chain_cut_edges, _chunk_starts,
-                              _group_by_vertex, _move_kept, _place_again, _retarget, _row_shifts, _shift_offsets, _signs,
-                              _star_options, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks, _warped,
-                              collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
+                              _group_by_vertex, _move_kept, _place_again, _retarget, _row_shifts, _shift_offsets,
+                              _signs, _star_options, _star_score, _stencil_offsets, _stencils, _stencils_in_chunks,
+                              _warped, collect_cut_edges, restuff, retarget_warps, stuff, warp_targets)
 from paroct.topology import int32_ids, match_faces, touching
 
 from .naive import cut_edges as naive_cut_edges
