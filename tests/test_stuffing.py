@@ -451,6 +451,36 @@ def test_cut_edges_of_lattices_cut_by_a_sphere(seed):
     assert np.array_equal(np.unique(dirs), np.arange(7))
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_cell_cut_edges_are_the_cut_edges_of_the_cells_tets(seed):
+    """cell_cut_edges reads each cut edge from the cell anchored at its start: over every
+    cell of a one-level lattice with corners of both classes, the same edges (ends, in the
+    same orientation, and directions) as collect_cut_edges over the cells' tets, in another
+    order, with arrays of the same types, and a lookup table that finds each edge.  The
+    classes: a ball, with random corners flipped, all well inside the lattice, so that every
+    cell a cut edge lies in is one of the lattice's."""
+    from paroct.mesher import _restrict
+
+    rng = np.random.default_rng(900 + seed)
+    anchors = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    anchors = anchors[np.argsort(morton_keys(anchors))]
+    vertices = lattice.number_vertices(anchors, np.ones(anchors.shape[0], dtype=np.int64))
+    coords = vertices.coords
+    inside = np.linalg.norm(coords - rng.uniform(3.5, 4.5, 3), axis=1) < rng.uniform(1.2, 2.8)
+    interior = np.flatnonzero((coords >= 1).all(axis=1) & (coords <= 6).all(axis=1))
+    inside[rng.choice(interior, 20, replace=False)] ^= True
+    cells, kept = _restrict(vertices, stuffing.mixed_rows(vertices.corner_ids, inside))
+    inside = inside[kept]
+    ours = stuffing.cell_cut_edges(cells.corner_ids, inside)
+    theirs = collect_cut_edges(lattice.graded_tets(cells), inside, cells.coords)
+    assert [a.dtype for a in ours] == [a.dtype for a in theirs]
+    assert ours[0].shape[0] == theirs[0].shape[0] > 50
+    assert sorted(zip(*(a.tolist() for a in ours[:3]))) == sorted(zip(*(a.tolist() for a in theirs[:3])))
+    head, upper, chain = ours[3:]
+    for e, (a, b) in enumerate(zip(ours[0], ours[1])):
+        assert stuffing._edge_of(head, upper, chain, min(a, b), max(a, b)) == e
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_stencils_in_chunks_writes_what_the_serial_kernel_writes(seed):
     """The parallel driver hands chunks of lattice tets to the serial kernel, each from the row

@@ -34,8 +34,8 @@ from .quality import OUTSIDE, TetSummary, outlier_flags, summarize
 from .repair import remove_pinches
 from .sharp import snap_to_features
 from .sizing import Region, SizeField, SizeFunction, positive_number, size_field, size_seeds
-from .stuffing import (DIHEDRAL_BOUND, CutEdges, collect_cut_edges, mixed_rows, restuff, retarget_warps,
-                       stuff, warp_targets)
+from .stuffing import (DIHEDRAL_BOUND, CutEdges, cell_cut_edges, collect_cut_edges, mixed_rows, restuff,
+                       retarget_warps, stuff, warp_targets)
 from .surface import Surface, SurfaceSource, load_surface
 from .topology import SurfaceTopology, used_vertices
 
@@ -1468,7 +1468,8 @@ def _mesh_locally(surface: Surface, field: SizeField, framed: FramedSurface, wan
     del vertices, keys, levels, in_band, sides
     stages.done("emit")
 
-    cuts = cut_edges(frame, snapped, faces, coords, tets, inside, crossings, report, buckets)
+    cuts = cut_edges(frame, snapped, faces, coords, collect_cut_edges(np.ascontiguousarray(tets), inside, coords), inside,
+                     crossings, report, buckets)
     targets = warp_targets(cuts, coords, frame.h, spacing)
     lattice_points = frame.to_space(coords)
     points, out_tets, offsets = stuff(lattice_points, coords, tets, inside, cuts, targets, flat_ok=True,
@@ -1629,7 +1630,8 @@ def finest_band(frame: FatFrame, snapped, faces, crossings: dict, report: MeshRe
     cut_keys = np.compress(is_cut, met)
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
-    cuts = cut_edges(frame, snapped, faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings, report)
+    cuts = cut_edges(frame, snapped, faces, cut_cells.coords, cell_cut_edges(cut_cells.corner_ids, inside), inside,
+                     crossings, report)
     targets = warp_targets(cuts, cut_cells.coords, frame.h)
     around = _cells_around(cut_cells.coords, targets >= 0, MAX_LEVEL - finest)
     band = unique_level_keys(np.concatenate([cut_keys, around]), finest)
@@ -1798,12 +1800,13 @@ def _restricted(corner_ids, leaves, coords):
     return out_ids, out_coords, kept
 
 
-def cut_edges(frame: FatFrame, snapped, faces, coords, tets, inside, crossings: dict, report: MeshReport,
+def cut_edges(frame: FatFrame, snapped, faces, coords, edges: tuple, inside, crossings: dict, report: MeshReport,
               buckets: FaceBuckets | None = None) -> CutEdges:
-    """Cut points of every edge of the tets whose ends differ in class: unit lattice edges
-    along their rows, others (coarse lattice edges, template edges) against the triangles of
-    ``buckets`` (needed only if there are such edges)."""
-    starts, ends, dirs, *table = collect_cut_edges(np.ascontiguousarray(tets), inside, coords)
+    """Cut points of the edges whose ends differ in class, ``edges`` as collect_cut_edges
+    gives them for tets (or cell_cut_edges for the cells of a one-level band): unit lattice
+    edges along their rows, others (coarse lattice edges, template edges) against the
+    triangles of ``buckets`` (needed only if there are such edges)."""
+    starts, ends, dirs, *table = edges
     fracs = np.empty(starts.shape[0])
     crossed = np.empty(starts.shape[0], dtype=np.int32)
     other = np.nonzero(dirs < 0)[0]

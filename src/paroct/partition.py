@@ -48,7 +48,7 @@ from .quality import OUTSIDE as OUTSIDE_BOUND
 from .owners import owned_ids
 from .range_finish import finish_in_ranges
 from .range_pinches import BoundaryFaces, OwnerFans, RangeTets, fans_by_owners, owned_boundary, repair_pinches_in_ranges
-from .stuffing import CutEdges, collect_cut_edges, mixed_rows, stuff, warp_targets
+from .stuffing import CutEdges, cell_cut_edges, collect_cut_edges, mixed_rows, stuff, warp_targets
 from .surface import Surface, SurfaceSource
 
 #: No lattice points: (0, 3) int64, what joins of no pieces start from.
@@ -358,7 +358,9 @@ def band_in_range(frame: FatFrame, snapped: np.ndarray, faces: np.ndarray, first
     is_cut = mixed_rows(corners.corner_ids, corner_class)
     cut_cells, kept = _restrict(corners, is_cut)
     inside = corner_class[kept]
-    cuts = cut_edges(frame, local_snapped, local_faces, cut_cells.coords, graded_tets(cut_cells), inside, crossings,
+    # The tets' edges, not cell_cut_edges: a cut edge here may be owned by a cell outside these.
+    cuts = cut_edges(frame, local_snapped, local_faces, cut_cells.coords,
+                     collect_cut_edges(graded_tets(cut_cells), inside, cut_cells.coords), inside, crossings,
                      MeshReport(frame.h, frame.levels))
     targets = warp_targets(cuts, cut_cells.coords, frame.h)  # right at the corners of the range's cells
     around = _cells_around(cut_cells.coords, targets >= 0, MAX_LEVEL - levels)
@@ -420,7 +422,7 @@ def merge_band_pieces(frame: FatFrame, pieces: list[BandPiece], report: MeshRepo
         raise AssertionError(f"the pieces hold {index.vertex_keys.shape[0]} band vertices, the cut cells "
                              f"{coords.shape[0]}")
     inside = index.inside[at]
-    starts, ends, dirs, *table = collect_cut_edges(graded_tets(cut_cells), inside, coords)
+    starts, ends, dirs, *table = cell_cut_edges(cut_cells.corner_ids, inside)  # as finest_band numbers them
     if index.keys.shape[0] != starts.shape[0]:
         raise AssertionError(f"the pieces hold {index.keys.shape[0]} cut edges, the cut cells {starts.shape[0]}")
     keys = edge_keys(coords[starts], coords[ends])
