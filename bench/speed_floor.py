@@ -21,8 +21,9 @@ model and size both meshed, prints:
   call, every kernel called from Python timed; the rest of the call is the Python and numpy
   between them.  A model whose kernels exceed its budget cannot reach the target however
   little runs between them.
-Last, per size, the median of needs and what the models that need least ask when more
-than half of them reach the target (which takes the median over the models there).
+Last, per size, the median of needs, what the models that need least ask when more than
+half of them reach the target (which takes the median over the models there), and the
+median over all models of the kernels' time against the budget.
 """
 
 from __future__ import annotations
@@ -176,8 +177,8 @@ def main(argv=None) -> int:
     for div, values in needs.items():
         half = len(values) // 2 + 1  # more than half of the models
         print(f"/{div:g}: median needs {statistics.median(values):.2f} x; the {half} cheapest of {len(values)} "
-              f"need up to {sorted(values)[half - 1]:.2f} x; their kernels alone, a median "
-              f"{statistics.median(kernel_needs[div]):.2f} x of the budget")
+              f"need up to {sorted(values)[half - 1]:.2f} x; the kernels alone, a median over all "
+              f"{len(values)} of {statistics.median(kernel_needs[div]):.2f} x of the budget")
     return 0
 
 
