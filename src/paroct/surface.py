@@ -166,6 +166,9 @@ def _weld_kernel(vertices, bits, faces):
         size *= 2
     table = np.full(size, -1, dtype=np.int32)
     first = np.empty(3 * nf, dtype=np.int32)  # the input vertex standing for each merged one
+    # The merged vertices' bits, compared in place of the input's: merged ids come in the
+    # faces' order, so those a face matches were mostly made by the faces just before it.
+    first_bits = np.empty((3 * nf, 3), dtype=np.uint64)
     merged = np.empty((nf, 3), dtype=np.int32)
     m = 0
     for f in range(nf):
@@ -184,12 +187,13 @@ def _weld_kernel(vertices, bits, faces):
                         return np.empty((0, 3), dtype=np.float64), np.empty((0, 3), dtype=np.int32), False
                     table[slot] = m
                     first[m] = v
+                    first_bits[m, 0] = b0
+                    first_bits[m, 1] = b1
+                    first_bits[m, 2] = b2
                     merged[f, k] = m
                     m += 1
                     break
-                u = first[j]
-                if _coordinate_bits(bits, u, 0) == b0 and _coordinate_bits(bits, u, 1) == b1 \
-                        and _coordinate_bits(bits, u, 2) == b2:
+                if first_bits[j, 0] == b0 and first_bits[j, 1] == b1 and first_bits[j, 2] == b2:
                     merged[f, k] = j
                     break
                 slot = (slot + 1) & (size - 1)
