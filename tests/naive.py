@@ -795,3 +795,33 @@ def unshared_faces(faces: np.ndarray) -> np.ndarray:
         key = tuple(sorted(f))
         count[key] = count.get(key, 0) + 1
     return np.array([f for f in np.asarray(faces).tolist() if count[tuple(sorted(f))] == 1]).reshape(-1, 3)
+
+
+def prism_triangulations() -> np.ndarray:
+    """stuffing.PRISM_TETS by brute force: for each choice of quad diagonals (bit i of the index:
+    0 joins bottom i to top i+1, 1 joins bottom i+1 to top i; bottom 0, 1, 2, top 3, 4, 5, 3 + i
+    above i), the first triple of tets (in itertools' order) with no tet holding a whole quad,
+    every face shared by at most two tets and those held once exactly the prism's boundary
+    split along the diagonals; -1 rows where none does (the two cyclic choices)."""
+    import itertools
+
+    bottom, top = [0, 1, 2], [3, 4, 5]
+    quads = [(bottom[i], bottom[(i + 1) % 3], top[(i + 1) % 3], top[i]) for i in range(3)]
+    table = np.full((8, 3, 4), -1, dtype=np.int64)
+    for bits in range(8):
+        diagonals = [(q[0], q[2]) if not (bits >> i) & 1 else (q[1], q[3]) for i, q in enumerate(quads)]
+        boundary = {frozenset(bottom), frozenset(top)}
+        for q, d in zip(quads, diagonals):
+            for other in (x for x in q if x not in d):
+                boundary.add(frozenset(d + (other,)))
+        for triple in itertools.combinations(itertools.combinations(range(6), 4), 3):
+            if any(set(q) <= set(t) for t in triple for q in quads):
+                continue  # a tet holding a whole (planar) quad is flat
+            count: dict = {}
+            for t in triple:
+                for f in itertools.combinations(t, 3):
+                    count[frozenset(f)] = count.get(frozenset(f), 0) + 1
+            if {f for f, c in count.items() if c == 1} == boundary and max(count.values()) <= 2:
+                table[bits] = triple
+                break
+    return table

@@ -22,6 +22,8 @@ from paroct.stuffing import PRISM_TETS
 from paroct.surface import load_surface
 from paroct.topology import boundary_faces, match_faces, surface_topology
 
+from . import naive
+
 DATA = Path(__file__).resolve().parent.parent / "data"
 FAT_RATIO = 3 / np.sqrt(10)  # = (3/2) sqrt(2/5) = 0.948683; '3 sqrt(2/5)' is a misprint
 LS_MIN, LS_MAX = 10.7, 164.8
@@ -595,6 +597,12 @@ def test_prism_table_tets_are_valid_for_a_convex_prism():
         assert np.isclose(sum(abs(v) for v in vols), 0.5) and min(abs(v) for v in vols) > 0
 
 
+def test_prism_table_is_the_brute_force_search():
+    # The table is written out; its slow twin searches the triples of tets for each diagonal choice.
+    assert np.array_equal(PRISM_TETS, naive.prism_triangulations())
+    assert PRISM_TETS.dtype == np.int64 and PRISM_TETS.flags.c_contiguous
+
+
 @pytest.mark.parametrize("ext", [".obj", ".off", ".ply", ".stl", "ascii.stl"])
 def test_surface_formats_load_the_same_solid(tmp_path, ext):
     import meshio
@@ -741,8 +749,6 @@ def test_outlier_flags_are_tet_qualitys_verdicts(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_match_faces_matches_a_dictionary(seed):
-    from . import naive
-
     rng = np.random.default_rng(seed)
     # A lattice block (every interior face twice), shuffled, with a few tets repeated (overloaded
     # faces) or flipped (same-side faces), and sparse vertex ids.

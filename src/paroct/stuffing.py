@@ -413,39 +413,23 @@ def warp_targets(cuts: CutEdges, coords: np.ndarray, h: float, spacing: np.ndarr
     return _warp(coords, cuts.starts, cuts.ends, distance, violated)
 
 
-def _prism_triangulations() -> np.ndarray:
-    """Three tets (8, 3, 4) splitting a triangular prism, per choice of quad diagonals.
-
-    Prism vertices 0, 1, 2 (bottom) and 3, 4, 5 (top, 3 + i above i); quad i is
-    (i, i+1, 4+i, 3+i) mod 3 and bit i of the index picks its diagonal: 0 joins
-    bottom i to top i+1, 1 joins bottom i+1 to top i.  The two cyclic choices (0 and 7)
-    admit no triangulation and hold -1.  Found by brute force over triples of tets.
-    """
-    import itertools
-
-    bottom, top = [0, 1, 2], [3, 4, 5]
-    quads = [(bottom[i], bottom[(i + 1) % 3], top[(i + 1) % 3], top[i]) for i in range(3)]
-    table = np.full((8, 3, 4), -1, dtype=np.int64)
-    for bits in range(8):
-        diagonals = [(q[0], q[2]) if not (bits >> i) & 1 else (q[1], q[3]) for i, q in enumerate(quads)]
-        boundary = {frozenset(bottom), frozenset(top)}
-        for q, d in zip(quads, diagonals):
-            for other in (x for x in q if x not in d):
-                boundary.add(frozenset(d + (other,)))
-        for triple in itertools.combinations(itertools.combinations(range(6), 4), 3):
-            if any(set(q) <= set(t) for t in triple for q in quads):
-                continue  # a tet holding a whole (planar) quad is flat
-            count: dict = {}
-            for t in triple:
-                for f in itertools.combinations(t, 3):
-                    count[frozenset(f)] = count.get(frozenset(f), 0) + 1
-            if {f for f, c in count.items() if c == 1} == boundary and max(count.values()) <= 2:
-                table[bits] = triple
-                break
-    return table
-
-
-PRISM_TETS = _prism_triangulations()
+#: Three tets (8, 3, 4) splitting a triangular prism, per choice of quad diagonals.
+#: Prism vertices 0, 1, 2 (bottom) and 3, 4, 5 (top, 3 + i above i); quad i is
+#: (i, i+1, 4+i, 3+i) mod 3 and bit i of the index picks its diagonal: 0 joins bottom i to
+#: top i+1, 1 joins bottom i+1 to top i.  The two cyclic choices (0 and 7) admit no
+#: triangulation and hold -1.  Found by brute force over triples of tets, which
+#: tests/naive.py keeps (prism_triangulations) and the tests compare (a search at import
+#: cost every process 20 ms).
+PRISM_TETS = np.array([
+    [[-1, -1, -1, -1], [-1, -1, -1, -1], [-1, -1, -1, -1]],
+    [[0, 1, 2, 3], [1, 2, 3, 5], [1, 3, 4, 5]],
+    [[0, 1, 2, 4], [0, 2, 3, 4], [2, 3, 4, 5]],
+    [[0, 1, 2, 3], [1, 2, 3, 4], [2, 3, 4, 5]],
+    [[0, 1, 2, 5], [0, 1, 4, 5], [0, 3, 4, 5]],
+    [[0, 1, 2, 5], [0, 1, 3, 5], [1, 3, 4, 5]],
+    [[0, 1, 2, 4], [0, 2, 4, 5], [0, 3, 4, 5]],
+    [[-1, -1, -1, -1], [-1, -1, -1, -1], [-1, -1, -1, -1]],
+], dtype=np.int64)
 
 
 @nb.njit(cache=True, inline="always")
