@@ -59,7 +59,7 @@ def mixed_rows(ids, classes):
     return out
 
 
-#: Chunks of tets the parallel kernels hand to the threads.
+#: Chunks of tets (or cells) the parallel kernels hand to the threads.
 TET_CHUNKS = 64
 
 
@@ -126,7 +126,7 @@ def _cell_cut_edges(corner_ids, inside, corner_of_direction):
     """cell_cut_edges' edges: starts, ends (E,) int64 and directions (E,) int8, counted per
     chunk of cells, prefix-summed, then filled (each thread its own chunks' rows)."""
     k = corner_ids.shape[0]
-    n_chunks = min(k, 64)
+    n_chunks = min(k, TET_CHUNKS)
     first = np.zeros(n_chunks + 1, dtype=np.int64)
     for c in nb.prange(n_chunks):
         m = 0
