@@ -437,6 +437,22 @@ def star_violation(lattice_points, coords, tets, inside, cuts, targets, star, bo
     return float(max(0.0, (bound[0] - q.min_dihedral).max(), (q.max_dihedral - bound[1]).max()))
 
 
+def chord_volumes(points, faces, point_faces, surface_vertices, surface_faces) -> np.ndarray:
+    """Twin of check.chord_volumes, face by face: -area / 24 x the sum over the edges p -> q of
+    (n_q - n_p) . (q - p), n the unit normal of the surface triangle each vertex lies on; 0
+    for a face with a vertex on none (-1)."""
+    out = np.zeros(len(faces))
+    for f, face in enumerate(faces):
+        if min(point_faces[v] for v in face) < 0:
+            continue
+        normals = [np.array(unit_normal(*surface_vertices[surface_faces[point_faces[v]]])) for v in face]
+        turn = sum(float(np.dot(normals[(j + 1) % 3] - normals[j], points[face[(j + 1) % 3]] - points[face[j]]))
+                   for j in range(3))
+        a, b, c = (points[v] for v in face)
+        out[f] = -0.5 * float(np.linalg.norm(np.cross(b - a, c - a))) * turn / 24.0
+    return out
+
+
 def far_from_points(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
     """Mask of the queries with no point within radius: every pair measured."""
     if points.shape[0] == 0:
