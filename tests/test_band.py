@@ -361,6 +361,38 @@ def test_no_round_near_thin_places_where_the_chords_elsewhere_lose_the_volume(mo
     assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
 
 
+def _ball_and_plate():
+    """A ball of radius 1 with a plate 0.02 thick on one side: at diag/16 the ball's chords
+    lose over 1 % at size, the plate is thinner than the whole band at size / 8."""
+    plate = manifold3d.Manifold.cube([0.8, 0.8, 0.02], center=True).translate([1.2, 0, 0])
+    return (manifold3d.Manifold.sphere(1.0, 64) + plate).rotate([10, 20, 30])
+
+
+def test_where_the_chords_lose_at_size_the_rounds_start_from_half_of_it(monkeypatch):
+    """The ball and plate: no round from size can keep the ball's volume, and the whole band
+    at size / 2 keeps it but drops a corner of the plate; the rounds near the plate start
+    from there, and keep the solid.  Rounds from size only (as before session 58) lose the
+    volume each time, and so does every whole band down to size / 8: the mesh at size / 2 is
+    returned with a warning, with 3.6 x the tets."""
+    part = _ball_and_plate()
+    result = mesh(part, divisions=16)
+    rep = result.report
+    h = rep.requested_size
+    assert "(its chords)" in rep.notes[0] and rep.notes[1].startswith(f"boundary size {h:.4g} -> {h / 2:.4g}")
+    assert "refining near thin places from" in " ".join(rep.notes) and "the boundary misses 4 surface vertices" in rep.notes[2]
+    assert rep.notes[-1].endswith("in 1 measure-and-refine round") and rep.size < h / 4
+    assert not rep.warnings and abs(rep.volume_error) < 0.01
+    surface = load_surface(part)
+    assert h == pytest.approx(np.linalg.norm(surface.bbox_max - surface.bbox_min) / 16)  # the size asked, not the base
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
+    monkeypatch.setattr(mesher, "_chords_lose_elsewhere", lambda *args: "")
+    from_size = mesh(part, divisions=16).report
+    assert from_size.warnings and from_size.n_tets > 3 * rep.n_tets
+
+
 def test_rounds_go_on_where_refining_near_the_thin_places_splits_the_whole_boundary():
     """A sphere with a fin 0.06 thick through it at diag/10: the sphere's chords at size lose
     over 1 %, but the rounds near the fin, two element layers across it three levels down,

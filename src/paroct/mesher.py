@@ -355,23 +355,31 @@ def mesh(
         report = _pass_report(surface, field, band, stage_seconds)
         return PassOutcome(*_whole_pass(surface, field, band, asks, budget, report, progress, stage_seconds))
 
-    def refine_locally(at_size: MeshResult, lost: str, walls: ThinFeatures) -> LocalOutcome:
-        why = _chords_lose_elsewhere(surface, field, walls, floor, asks, at_size)
-        tried, tried_notes = list[LosingPass](), list[str]()
-        if not why:
-            # The whole band at h / 2, h / 4, ... as memory allows, for _thin_locally to try
-            # where one is estimated at fewer tets than its next round (h / 2 before the
-            # first).  Not at whole_floor: should everything lose, the pass there is the one
-            # returned, as before session 34.
-            wholes, whole = [], h / 2
-            while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
-                wholes.append(whole)
-                whole /= 2
-            local, why, tried, tried_notes = _thin_locally(surface, field, walls, floor, budget, lost, wholes,
-                                                           progress, stage_seconds, asks)
-            if local is not None:
-                local.report.notes = [*notes, *local.report.notes]
-                return LocalOutcome(local, tried, [], False)
+    def refine_locally(at_band: MeshResult, band: float, lost: str, walls: ThinFeatures) -> LocalOutcome:
+        # Rounds from the whole band at band: h, or a half of it where the chords at the sizes
+        # above lost the volume away from the thin places; the size field's own asks go with
+        # it, their depths counted from band.
+        banded = field if band == h else _at_boundary_size(field, band)
+        base = asks if band == h else asks.deeper_than(int(round(np.log2(h / band))))
+        why = _chords_lose_elsewhere(surface, banded, walls, floor, base, at_band)
+        if why:
+            note = f"refining the band only near thin places: {why}; refining the whole band instead"
+            return LocalOutcome(None, [], [note], False, chords_lose=True)
+        # The whole band at band / 2, band / 4, ... as memory allows, for _thin_locally to try
+        # where one is estimated at fewer tets than its next round (band / 2 before the first).
+        # Not at whole_floor: should everything lose, the pass there is the one returned, as
+        # before session 34.
+        wholes, whole = [], band / 2
+        while whole > whole_floor * (1 + 1e-9) and _fits(surface, field, whole, budget):
+            wholes.append(whole)
+            whole /= 2
+        local, why, tried, tried_notes = _thin_locally(surface, banded, walls, floor, budget, lost, wholes, progress,
+                                                       stage_seconds, base)
+        for report in [*([] if local is None else [local.report]), *(p.report for p in tried)]:
+            report.requested_size = h  # made for banded
+        if local is not None:
+            local.report.notes = [*notes, *local.report.notes]
+            return LocalOutcome(local, tried, [], False)
         if why:
             tried_notes = [*tried_notes, f"refining the band only near thin places: {why}; refining the whole band instead"]
         return LocalOutcome(None, tried, tried_notes, why == LOCAL_MEMORY)
@@ -427,13 +435,15 @@ class PassOutcome(NamedTuple):
 
 class LocalOutcome(NamedTuple):
     """What refining near thin places gave halve_whole_band: the result if it kept the solid
-    (else None), the whole-band passes it tried that lost, notes on them, and whether memory
-    stopped it."""
+    (else None), the whole-band passes it tried that lost, notes on them, whether memory
+    stopped it, and whether no round was made because the chords away from the thin places
+    lose the volume at that size (_chords_lose_elsewhere)."""
 
     result: MeshResult | None
     tried: list[LosingPass]
     notes: list[str]
     memory_bound: bool
+    chords_lose: bool = False
 
 
 def size_floors(surface: Surface, h: float, min_size: float | None) -> tuple[float, float]:
@@ -452,10 +462,13 @@ def size_floors(surface: Surface, h: float, min_size: float | None) -> tuple[flo
 
 def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_floor: float, budget: float,
                      thin_features: bool, one_pass: Callable[[float], PassOutcome], notes: list[str],
-                     refine_locally: Callable[[MeshResult, str, ThinFeatures], LocalOutcome] | None = None) -> MeshResult:
+                     refine_locally: Callable[[MeshResult, float, str, ThinFeatures], LocalOutcome] | None = None
+                     ) -> MeshResult:
     """mesh()'s passes: one_pass(band) at band = field.size; while it loses (_losses) and
-    thin_features, refine_locally (if given; with the first pass's result, what it lost and
-    its walls) near the walls after the first, then the whole
+    thin_features, refine_locally (if given; with the pass's result, its size, what it lost
+    and its walls) near the walls after the first (after the first at half the size where
+    the chords at size lost the volume away from them: LocalOutcome.chords_lose, and so on
+    down), then the whole
     band at halves of the size (skipping those refine_locally tried), down to whole_floor as
     the budget allows, until a pass keeps the solid or a finer pass loses more with nothing
     to explain it (touching parts).  Returns the last pass's result, or if it lost, the
@@ -464,6 +477,7 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
     it lost.  ParoctError if it keeps less than half the solid or has no tets."""
     h = field.size
     band, memory_bound, tried = h, False, list[float]()  # tried: whole-band sizes below h that a pass lost at
+    local_band, refined_locally = h, False  # the whole band's size the rounds near thin places start from
     best: tuple | None = None  # the whole-band pass whose boundary is nearest the input's so far
     losing: list[LosingPass] = []  # every whole-band pass that lost
     kept_text = ""
@@ -473,14 +487,17 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
             notes.append(note)
         if lost:
             losing.append(losing_pass(band, result, lost, advice, report, keep=band == h))
-        if refine_locally is not None and thin_features and lost and band == h and walls is not None:
-            local = refine_locally(result, lost, walls)
+        if refine_locally is not None and thin_features and lost and band == local_band and walls is not None:
+            local = refine_locally(result, band, lost, walls)
             if local.result is not None:
                 return local.result
-            tried = [p.band for p in local.tried]
+            tried += [p.band for p in local.tried]
             losing.extend(local.tried)
             notes.extend(local.notes)
-            memory_bound = local.memory_bound
+            memory_bound = memory_bound or local.memory_bound
+            refined_locally = refined_locally or not local.chords_lose
+            if local.chords_lose:
+                local_band = band / 2
         # Parts touching along an edge or at a point have no wall or gap between them that a
         # size could resolve: they come out joined at every size, and the finer the band the
         # more lattice edges join them (two cubes sharing an edge, turned 30 and 40 degrees,
@@ -518,7 +535,7 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
     report.notes = notes
     if lost:
         floor_text = kept_text or _why_no_finer(band, floor, whole_floor, thin_features, memory_bound,
-                                                refine_locally is not None)
+                                                None if refine_locally is None else refined_locally)
         coarser = None if kept_text else coarsest_keeping_as_much(surface, losing)
         # A pass to refuse is refused at the finest size tried, which says the most.
         if coarser is not None and coarser.band > band and not _losing_too_much(coarser.report):
@@ -537,18 +554,23 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
 
 
 def _why_no_finer(band: float, floor: float, whole_floor: float, thin_features: bool, memory_bound: bool,
-                  refined_locally: bool) -> str:
+                  refined_locally: bool | None) -> str:
     """Why halve_whole_band's last pass, at boundary size band, lost and none finer was made
-    ('' if thin_features is off), as a clause ending in '; '."""
+    ('' if thin_features is off), as a clause ending in '; '.  refined_locally: whether
+    refinement near thin places was tried (False: the chords away from them lost the volume
+    at every size it could start from), None where it is not made (meshing in ranges)."""
     if thin_features and band <= floor * (1 + 1e-9):
         return f"min_size = {floor:.4g} reached; "
     if thin_features and memory_bound:
         return f"a boundary size below {band:.4g} would not fit in memory (max_memory); "
     if thin_features and band <= whole_floor * (1 + 1e-9) and refined_locally:
         return f"min_size = {floor:.4g} reached near thin places and the whole boundary refined to {band:.4g}; "
-    if thin_features and band <= whole_floor * (1 + 1e-9):
+    if thin_features and band <= whole_floor * (1 + 1e-9) and refined_locally is None:
         return (f"the whole boundary refined to {band:.4g}, as far as it goes without min_size (finer only near thin "
                 "places, which mesh() refines and meshing in ranges does not yet); ")
+    if thin_features and band <= whole_floor * (1 + 1e-9):
+        return (f"the whole boundary refined to {band:.4g}, as far as it goes without min_size (no refinement near "
+                "thin places: the chords away from them lost the volume at each size it could start from); ")
     return ""
 
 
