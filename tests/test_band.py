@@ -337,6 +337,23 @@ def _count_passes(monkeypatch) -> list:
     return passes
 
 
+def _assert_keeps_the_solid(result, surface):
+    """check_mesh passes, and the mesh keeps the input's boundary components and genus and its
+    volume within 1 %; returns the check."""
+    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
+    assert check.ok, check.problems()
+    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    assert abs(result.report.volume_error) < 0.01
+    return check
+
+
+def _assert_is_the_mesh_asked(result, surface, size):
+    """The result is the very mesh asked at boundary size ``size`` with the same max_size and no
+    refinement near thin places."""
+    asked = mesh(surface, size=size, max_size=result.report.max_size, thin_features=False).mesh
+    assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
+
+
 def test_no_round_near_thin_places_where_the_chords_elsewhere_lose_the_volume(monkeypatch):
     """A sphere united with a cube at diag/20 loses 1.6 % of the volume at size, most of it to
     stuffing's chords on the sphere, away from the wedge-shaped creases whose gaps the rounds
@@ -353,12 +370,8 @@ def test_no_round_near_thin_places_where_the_chords_elsewhere_lose_the_volume(mo
     assert rep.notes[0].startswith("refining the band only near thin places: away from them the boundary at size")
     assert "(its chords), which no round near them changes; refining the whole band instead" in rep.notes[0]
     assert rep.notes[1].startswith(f"boundary size {h:.4g} -> {h / 2:.4g}: at {h:.4g} the mesh lost 1.6% of the volume")
-    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
-    assert check.ok, check.problems()
-    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
-    assert abs(rep.volume_error) < 0.01
-    asked = mesh(surface, size=h / 2, max_size=rep.max_size, thin_features=False).mesh
-    assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
+    _assert_keeps_the_solid(result, surface)
+    _assert_is_the_mesh_asked(result, surface, h / 2)
 
 
 def _ball_and_plate():
@@ -384,9 +397,7 @@ def test_where_the_chords_lose_at_size_the_rounds_start_from_half_of_it(monkeypa
     assert not rep.warnings and abs(rep.volume_error) < 0.01
     surface = load_surface(part)
     assert h == pytest.approx(np.linalg.norm(surface.bbox_max - surface.bbox_min) / 16)  # the size asked, not the base
-    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
-    assert check.ok, check.problems()
-    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
+    check = _assert_keeps_the_solid(result, surface)
     assert DIHEDRAL_BOUND[0] <= check.min_dihedral and check.max_dihedral <= DIHEDRAL_BOUND[1]
     monkeypatch.setattr(mesher, "_chords_lose_elsewhere", lambda *args: "")
     from_size = mesh(part, divisions=16).report
@@ -420,12 +431,8 @@ def test_a_round_that_still_loses_is_followed_by_the_whole_band_where_that_is_ch
     assert rep.size == pytest.approx(h / 2) and not rep.warnings
     assert "near thin walls the mesh lost" in rep.notes[-2]
     assert rep.notes[-1].startswith(f"boundary refined to {h / 2:.4g} everywhere: the whole band at size / 2 is estimated")
-    check = check_mesh(result.mesh.points, result.mesh.tets, surface)
-    assert check.ok, check.problems()
-    assert (check.boundary_components, check.boundary_genus) == (surface.components, surface.genus)
-    assert abs(rep.volume_error) < 0.01
-    asked = mesh(surface, size=h / 2, max_size=rep.max_size, thin_features=False).mesh
-    assert np.array_equal(asked.points, result.mesh.points) and np.array_equal(asked.tets, result.mesh.tets)
+    _assert_keeps_the_solid(result, surface)
+    _assert_is_the_mesh_asked(result, surface, h / 2)
 
 
 def _hollow_box():
