@@ -424,5 +424,11 @@ def test_chord_volumes_refuse_mismatched_arrays():
     points, faces = np.zeros((3, 3)), np.array([[0, 1, 2]])
     with pytest.raises(ValueError, match="len\\(point_faces\\) = 2 but len\\(points\\) = 3"):
         chord_volumes(points, faces, np.zeros(2, dtype=np.int64), points, faces)
-    with pytest.raises(ValueError, match="point_faces.max\\(\\) = 5 but len\\(surface_faces\\) = 1"):
+    with pytest.raises(ValueError, match="point_faces hold 0..5 but len\\(surface_faces\\) = 1"):
         chord_volumes(points, faces, np.array([0, 5, 0]), points, faces)
+    with pytest.raises(ValueError, match="point_faces hold -2..0"):
+        chord_volumes(points, faces, np.array([0, -2, 0]), points, faces)
+    with pytest.raises(ValueError, match="faces hold 0..3 but len\\(points\\) = 3"):
+        chord_volumes(points, np.array([[0, 1, 3]]), np.zeros(3, dtype=np.int64), points, faces)
+    with pytest.raises(ValueError, match="surface_faces hold 0..7 but len\\(surface_vertices\\) = 3"):
+        chord_volumes(points, faces, np.zeros(3, dtype=np.int64), points, np.array([[0, 1, 7]]))

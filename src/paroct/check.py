@@ -338,17 +338,17 @@ def chord_volumes(points: np.ndarray, faces: np.ndarray, point_faces: np.ndarray
 
     points: (N, 3) mesh points; faces: (F, 3) boundary triangles, outward; point_faces: (N,)
     the surface triangle each point lies on (MeshResult.point_faces), an index into
-    surface_faces (T, 3) over surface_vertices (V, 3), or -1: a face with such a vertex
-    gets 0.  Over a triangle whose vertices lie on it, the surface is taken as
-    a quadratic height, zero at the vertices: its mean is a third of the sum of the heights
-    at the edge midpoints (the edge bubbles lambda_i lambda_j average 1/12 and are 1/4 at
-    their midpoint), and the height at the midpoint of edge p -> q, where the normal turns
-    steadily from n_p to n_q, is (n_q - n_p) . (q - p) / 8: volume = -area / 24 x the sum
-    over the edges, n the unit normal of the surface triangle each vertex lies on.  A
-    faceted surface's kinks are underestimated (a chord across a kink of angle t lies
-    L^2 t / 4 from it, the steady turn gives L^2 sin t / 6): summed over a mesh, 0.30-1.03 x
-    the true volume error on 90 random unions and differences of boxes, spheres and
-    cylinders that kept their topology (median 0.68; docs/design.md, session 58).
+    surface_faces (T, 3) over surface_vertices (V, 3), or -1: a face with such a vertex gets
+    0.  Over a triangle whose vertices lie on it, the surface is taken as a quadratic height,
+    zero at the vertices: its mean is a third of the sum of the heights at the edge midpoints
+    (the edge bubbles lambda_i lambda_j average 1/12 and are 1/4 at their midpoint), and the
+    height at the midpoint of edge p -> q, where the normal turns steadily from n_p to n_q,
+    is (n_q - n_p) . (q - p) / 8: volume = -area / 24 x the sum over the edges, n the unit
+    normal of the surface triangle each vertex lies on.  A faceted surface's kinks are
+    underestimated (a chord across a kink of angle t lies L^2 t / 4 from it, the steady turn
+    gives L^2 sin t / 6): summed over a mesh, 0.30-1.03 x the true volume error on 90 random
+    unions and differences of boxes, spheres and cylinders that kept their topology (median
+    0.68; docs/design.md, session 58).  ValueError on shapes or indices out of range.
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
@@ -357,11 +357,18 @@ def chord_volumes(points: np.ndarray, faces: np.ndarray, point_faces: np.ndarray
         raise ValueError(f"faces.shape = {faces.shape}: must be (F, 3)")
     if point_faces.shape != (points.shape[0],):
         raise ValueError(f"len(point_faces) = {point_faces.shape[0]} but len(points) = {points.shape[0]}")
-    if point_faces.size and int(point_faces.max()) >= surface_faces.shape[0]:
-        raise ValueError(f"point_faces.max() = {int(point_faces.max())} but len(surface_faces) = {surface_faces.shape[0]}")
+    surface_vertices = np.ascontiguousarray(surface_vertices, dtype=np.float64)
+    surface_faces = np.ascontiguousarray(surface_faces, dtype=np.int64)
+    if faces.size and (int(faces.min()) < 0 or int(faces.max()) >= points.shape[0]):
+        raise ValueError(f"faces hold {int(faces.min())}..{int(faces.max())} but len(points) = {points.shape[0]}")
+    if point_faces.size and (int(point_faces.min()) < -1 or int(point_faces.max()) >= surface_faces.shape[0]):
+        raise ValueError(f"point_faces hold {int(point_faces.min())}..{int(point_faces.max())} but "
+                         f"len(surface_faces) = {surface_faces.shape[0]}")
+    if surface_faces.size and (int(surface_faces.min()) < 0 or int(surface_faces.max()) >= surface_vertices.shape[0]):
+        raise ValueError(f"surface_faces hold {int(surface_faces.min())}..{int(surface_faces.max())} but "
+                         f"len(surface_vertices) = {surface_vertices.shape[0]}")
     out = np.empty(faces.shape[0])
-    _chord_volumes(points, faces, point_faces, np.ascontiguousarray(surface_vertices, dtype=np.float64),
-                   np.ascontiguousarray(surface_faces, dtype=np.int64), out)
+    _chord_volumes(points, faces, point_faces, surface_vertices, surface_faces, out)
     return out
 
 
