@@ -18,6 +18,7 @@ import numba as nb
 import numpy as np
 
 from .errors import ParoctError
+from .features import triangle_normal
 from .intersections import crossing_triangles
 from .quality import tet_quality, unit_scaled
 from .surface import Surface
@@ -298,18 +299,6 @@ def long_triangle_centres(vertices, faces, min_edge):
     return ids, out
 
 
-@nb.njit(cache=True)
-def _unit_normal(vertices, faces, f):
-    ax, ay, az = vertices[faces[f, 0], 0], vertices[faces[f, 0], 1], vertices[faces[f, 0], 2]
-    ux, uy, uz = vertices[faces[f, 1], 0] - ax, vertices[faces[f, 1], 1] - ay, vertices[faces[f, 1], 2] - az
-    vx, vy, vz = vertices[faces[f, 2], 0] - ax, vertices[faces[f, 2], 1] - ay, vertices[faces[f, 2], 2] - az
-    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if norm == 0.0:
-        return 0.0, 0.0, 0.0
-    return nx / norm, ny / norm, nz / norm
-
-
 @nb.njit(cache=True, parallel=True)
 def _chord_volumes(points, faces, point_faces, vertices, surface_faces, out):
     for f in nb.prange(faces.shape[0]):
@@ -319,8 +308,8 @@ def _chord_volumes(points, faces, point_faces, vertices, surface_faces, out):
         turn = 0.0
         for j in range(3):
             p, q = faces[f, j], faces[f, (j + 1) % 3]
-            npx, npy, npz = _unit_normal(vertices, surface_faces, point_faces[p])
-            nqx, nqy, nqz = _unit_normal(vertices, surface_faces, point_faces[q])
+            npx, npy, npz = triangle_normal(vertices, surface_faces, point_faces[p])
+            nqx, nqy, nqz = triangle_normal(vertices, surface_faces, point_faces[q])
             turn += ((nqx - npx) * (points[q, 0] - points[p, 0]) + (nqy - npy) * (points[q, 1] - points[p, 1])
                      + (nqz - npz) * (points[q, 2] - points[p, 2]))
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]

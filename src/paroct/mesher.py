@@ -375,9 +375,8 @@ def mesh(
             whole /= 2
         local, why, tried, tried_notes = _thin_locally(surface, banded, walls, floor, budget, lost, wholes, progress,
                                                        stage_seconds, base)
-        for report in [*([] if local is None else [local.report]), *(p.report for p in tried)]:
-            report.requested_size = h  # made for banded
         if local is not None:
+            local.report.requested_size = h  # made for banded; the tried passes' reports are not returned
             local.report.notes = [*notes, *local.report.notes]
             return LocalOutcome(local, tried, [], False)
         if why:
