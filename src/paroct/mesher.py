@@ -361,7 +361,8 @@ def mesh(
         # it, their depths counted from band.
         banded = field if band == h else _at_boundary_size(field, band)
         base = asks if band == h else asks.deeper_than(int(round(np.log2(h / band))))
-        why = _chords_lose_elsewhere(surface, banded, walls, floor, base, at_band)
+        first = _first_local_ask(surface, banded, walls, floor, base)
+        why = _chords_lose_elsewhere(surface, banded, first, at_band)
         if why:
             note = f"refining the band only near thin places: {why}; refining the whole band instead"
             return LocalOutcome(None, [], [note], False, chords_lose=True)
@@ -374,7 +375,7 @@ def mesh(
             wholes.append(whole)
             whole /= 2
         local, why, tried, tried_notes = _thin_locally(surface, banded, walls, floor, budget, lost, wholes, progress,
-                                                       stage_seconds, base)
+                                                       stage_seconds, base, first)
         if local is not None:
             local.report.requested_size = h  # made for banded; the tried passes' reports are not returned
             local.report.notes = [*notes, *local.report.notes]
@@ -737,8 +738,19 @@ def _local_depth(size: float, floor: float) -> int:
     return int(np.floor(np.log2(size / floor) + 1e-9))
 
 
-def _chords_lose_elsewhere(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, base: FeatureAsks,
-                           at_size: MeshResult) -> str:
+def _first_local_ask(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float,
+                     base: FeatureAsks) -> LocalAsk | None:
+    """_local_ask of the first round near thin places (levels capped at WHOLE_BAND_DEPTH, no
+    extra), which _chords_lose_elsewhere and _thin_locally both read (made once: 1.9 ms of
+    plate_holes at diag/40); None where floor leaves no level below field.size."""
+    max_depth = _local_depth(field.size, floor)
+    if max_depth < 1:
+        return None
+    coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
+    return _local_ask(coarse, walls, min(max_depth, WHOLE_BAND_DEPTH), 0, base)
+
+
+def _chords_lose_elsewhere(surface: Surface, field: SizeField, first: LocalAsk | None, at_size: MeshResult) -> str:
     """Why no round near the thin places (_thin_locally) can keep the solid, or '' if one may.
 
     A round refines the band in the coarse cells near the walls and gaps (and where base
@@ -750,16 +762,14 @@ def _chords_lose_elsewhere(surface: Surface, field: SizeField, walls: ThinFeatur
     a cell left at size, is beyond VOLUME_LOSS_WARNING, every round loses (the estimate is
     below the true error on most parts, so this holds the more): fertility at diag/40 lost
     1.8 % at size (estimated 1.5, 1.1 of it away from its thin walls), its round near them
-    1.2 % in 33 ms, before the whole band at size / 2 kept it."""
+    1.2 % in 33 ms, before the whole band at size / 2 kept it.  first: the first round's ask
+    (_first_local_ask; None or no band: no round, and '')."""
     if at_size.boundary_faces is None or at_size.point_faces is None or not at_size.boundary_faces.size:
         return ""
-    max_depth = _local_depth(field.size, floor)
-    if max_depth < 1:
+    if first is None or first.wanted is None:
         return ""
     coarse = fat_frame(surface.bbox_min, surface.bbox_max, field.size)
-    _, _, wanted = _local_ask(coarse, walls, min(max_depth, WHOLE_BAND_DEPTH), 0, base)
-    if wanted is None:
-        return ""
+    wanted = first.wanted
     deep = wanted.levels >= coarse.levels + 2
     if deep.any():  # in the coarse frame, a cell's anchor in lattice units is its coordinates
         centres = octant_lattice_anchors(wanted.keys[deep], coarse) + 0.5
@@ -779,7 +789,8 @@ def _chords_lose_elsewhere(surface: Surface, field: SizeField, walls: ThinFeatur
 
 def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor: float, budget: float, lost: str,
                   wholes: Sequence[float], progress: Callable[[str], None] | None,
-                  stage_seconds: dict, base: FeatureAsks) -> tuple[MeshResult | None, str, list[LosingPass], list[str]]:
+                  stage_seconds: dict, base: FeatureAsks,
+                  first: LocalAsk | None = None) -> tuple[MeshResult | None, str, list[LosingPass], list[str]]:
     """Refine the band only near the thin walls and gaps (two element layers across each,
     down to ``floor``), measure, mend and refine until every tet is within DIHEDRAL_BOUND, and
     one level more while the mesh still loses topology or volume.
@@ -811,7 +822,7 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     needs = _thin_asks(coarse, walls, max_depth, 0)[1]  # the levels each sample's two layers need
     thinnest = float(np.min(walls.thickness, initial=np.inf, where=walls.thickness > 0))  # 0: not measured
     for step in range(2 * max_depth + 1):  # each step deepens the cap, the asks or both
-        frame, depth, wanted = _local_ask(coarse, walls, cap, extra, base)
+        frame, depth, wanted = first if step == 0 and first is not None else _local_ask(coarse, walls, cap, extra, base)
         if depth.size == 0:
             return None, "", tried, tried_notes
         if frame.levels > MAX_FRAME_LEVELS:
@@ -1426,20 +1437,28 @@ def _refined_frame(frame: FatFrame, depth: int) -> FatFrame:
     return FatFrame(origin=frame.origin, h=frame.h / 2**depth, levels=frame.levels + depth)
 
 
-def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int,
-               base: FeatureAsks) -> tuple[FatFrame, np.ndarray, BandLevels | None]:
-    """The finest frame, the depths (K,) of _thin_asks and the band asked for in that frame,
-    with base's asks too (None if no wall or gap asks: K = 0, or a frame deeper than
+class LocalAsk(NamedTuple):
+    """A round's ask near thin places (_local_ask): the finest frame, the depths (K,) of
+    _thin_asks and the band asked in that frame (None if none)."""
+
+    frame: FatFrame
+    depth: np.ndarray
+    wanted: BandLevels | None
+
+
+def _local_ask(coarse: FatFrame, walls: ThinFeatures, max_depth: int, extra: int, base: FeatureAsks) -> LocalAsk:
+    """LocalAsk: the finest frame, the depths (K,) of _thin_asks and the band asked for in that
+    frame, with base's asks too (None if no wall or gap asks: K = 0, or a frame deeper than
     MAX_FRAME_LEVELS)."""
     points, depth = _thin_asks(coarse, walls, max_depth, extra)
     deepest = max(int(depth.max(initial=0)), int(base.depth.max(initial=0)))
     frame = _refined_frame(coarse, deepest)
     if depth.size == 0 or frame.levels > MAX_FRAME_LEVELS:
-        return frame, depth, None
+        return LocalAsk(frame, depth, None)
     walls_asked = band_levels(frame, coarse.levels, points * 2.0**deepest, coarse.levels + depth)
     if base.empty:
-        return frame, depth, walls_asked
-    return frame, depth, merge_band_levels(walls_asked, _asked_levels(coarse, deepest, base))
+        return LocalAsk(frame, depth, walls_asked)
+    return LocalAsk(frame, depth, merge_band_levels(walls_asked, _asked_levels(coarse, deepest, base)))
 
 
 def _asked_levels(coarse: FatFrame, deepest: int, asks: FeatureAsks) -> BandLevels:
