@@ -798,6 +798,8 @@ def _thin_locally(surface: Surface, field: SizeField, walls: ThinFeatures, floor
     base: asks of the size field's own (curvature, layers, patch sizes: lfs.py; depths below
     field.size) that every round and whole-band pass keeps.
     wholes: whole-band sizes below field.size, coarsest first, that may be tried instead.
+    first: the first step's ask, _first_local_ask's for these surface, field, walls, floor and
+    base (made here if None).
     Before a round, the coarsest not yet tried is meshed over the whole band when
     estimate_tets puts it below the round's _local_tets (before the first round size / 2,
     then size / 4 below QUARTER_BAND_SHARE of it), once each; the rounds go on where it
