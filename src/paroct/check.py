@@ -305,13 +305,17 @@ def _chord_volumes(points, faces, point_faces, vertices, surface_faces, out):
         out[f] = 0.0
         if point_faces[faces[f, 0]] < 0 or point_faces[faces[f, 1]] < 0 or point_faces[faces[f, 2]] < 0:
             continue
+        normals = np.empty((3, 3))  # the unit normal under each vertex, each found once
+        for j in range(3):
+            normals[j, 0], normals[j, 1], normals[j, 2] = triangle_normal(vertices, surface_faces,
+                                                                          point_faces[faces[f, j]])
         turn = 0.0
         for j in range(3):
-            p, q = faces[f, j], faces[f, (j + 1) % 3]
-            npx, npy, npz = triangle_normal(vertices, surface_faces, point_faces[p])
-            nqx, nqy, nqz = triangle_normal(vertices, surface_faces, point_faces[q])
-            turn += ((nqx - npx) * (points[q, 0] - points[p, 0]) + (nqy - npy) * (points[q, 1] - points[p, 1])
-                     + (nqz - npz) * (points[q, 2] - points[p, 2]))
+            k = (j + 1) % 3
+            p, q = faces[f, j], faces[f, k]
+            turn += ((normals[k, 0] - normals[j, 0]) * (points[q, 0] - points[p, 0])
+                     + (normals[k, 1] - normals[j, 1]) * (points[q, 1] - points[p, 1])
+                     + (normals[k, 2] - normals[j, 2]) * (points[q, 2] - points[p, 2]))
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         ux, uy, uz = points[b, 0] - points[a, 0], points[b, 1] - points[a, 1], points[b, 2] - points[a, 2]
         vx, vy, vz = points[c, 0] - points[a, 0], points[c, 1] - points[a, 1], points[c, 2] - points[a, 2]

@@ -320,9 +320,10 @@ def mesh(
     allows (not below size / 8 unless min_size is given).  Where the boundary's chords away
     from the thin places are estimated to lose more than 1 % of the volume by themselves
     (check.chord_volumes), which no refinement near them mends, no round is made: the whole
-    boundary shrinks by halves at once.  Where every pass loses, the
-    coarsest that no finer one keeps more of the solid than (keeps_more) is returned with a
-    warning: the size asked, where refining kept nothing more.  The report's notes say what
+    boundary shrinks by halves at once, and the rounds start from the first halved size
+    whose chords do not rule them out.  Where every pass loses, the coarsest that no finer
+    one keeps more of the solid than (keeps_more) is returned with a warning: the size
+    asked, where refining kept nothing more.  The report's notes say what
     was done.
     False keeps size and only warns.  A mesh that keeps less than half the solid's volume
     raises ParoctError, as one with no tets does.  max_memory: bytes the run may use
@@ -468,13 +469,12 @@ def halve_whole_band(surface: Surface, field: SizeField, floor: float, whole_flo
     thin_features, refine_locally (if given; with the pass's result, its size, what it lost
     and its walls) near the walls after the first (after the first at half the size where
     the chords at size lost the volume away from them: LocalOutcome.chords_lose, and so on
-    down), then the whole
-    band at halves of the size (skipping those refine_locally tried), down to whole_floor as
-    the budget allows, until a pass keeps the solid or a finer pass loses more with nothing
-    to explain it (touching parts).  Returns the last pass's result, or if it lost, the
-    best one kept or else the coarsest that no finer pass keeps more than
-    (coarsest_keeping_as_much), its report noting the steps (notes first) and warning of what
-    it lost.  ParoctError if it keeps less than half the solid or has no tets."""
+    down), then the whole band at halves of the size (skipping those refine_locally
+    tried), down to whole_floor as the budget allows, until a pass keeps the solid or a
+    finer pass loses more with nothing to explain it (touching parts).  Returns the last
+    pass's result, or if it lost, the best one kept or else the coarsest that no finer pass
+    keeps more than (coarsest_keeping_as_much), its report noting the steps (notes first)
+    and warning of what it lost.  ParoctError if it keeps less than half the solid or has no tets."""
     h = field.size
     band, memory_bound, tried = h, False, list[float]()  # tried: whole-band sizes below h that a pass lost at
     local_band, refined_locally = h, False  # the whole band's size the rounds near thin places start from
