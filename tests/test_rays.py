@@ -129,6 +129,43 @@ def test_cut_fractions_lie_on_the_surface():
         assert max(naive.point_triangle_distance(p, *v[f[t]]) for p, t in zip(x, crossed)) < 1e-6
 
 
+def test_edge_cuts_of_all_directions_at_once_are_each_directions_own():
+    # add_edge_cut_fractions takes the cut edges of every direction in one call, in blocks of
+    # rays.EDGE_BLOCK grouped by direction: the same cuts as one direction at a time.
+    rng = np.random.default_rng(11)
+    v, f = _box_surface(np.zeros(3), np.ones(3))
+    v = v @ _rotation(rng).T
+    frame = fat_frame(v.min(0), v.max(0), 0.05)
+    snapped = rays.snap_surface(frame, v)
+    points = _lattice_points(frame, v.min(0), v.max(0))
+    inside = rays.winding_numbers(rays.row_crossings(frame, snapped, f, X_AXIS_DIRECTION), points) > 0
+    lookup = {tuple(p): i for i, p in enumerate(points)}
+    starts, dirs = [], []
+    for d in range(7):
+        ends = np.array([lookup.get(tuple(p + EDGE_DIRECTIONS[d]), -1) for p in points])
+        cut = np.flatnonzero((ends >= 0) & (inside != inside[np.maximum(ends, 0)]))
+        starts.append(cut)
+        dirs.append(np.full(cut.shape[0], d, dtype=np.int8))
+    order = rng.permutation(sum(s.shape[0] for s in starts))
+    starts, dirs = np.concatenate(starts)[order], np.concatenate(dirs)[order]
+    dirs[rng.random(dirs.shape[0]) < 0.05] = -1  # not unit lattice edges: left alone
+    assert dirs.shape[0] > 3 * rays.EDGE_BLOCK
+    crossings = {d: rays.row_crossings(frame, snapped, f, d) for d in range(7)}
+    fracs, status = np.full(dirs.shape[0], -2.0), np.full(dirs.shape[0], 7, dtype=np.int8)
+    crossed = np.full(dirs.shape[0], -2, dtype=np.int32)
+    rays.add_edge_cut_fractions(crossings, points, starts, inside, dirs, fracs, status, crossed)
+    other = dirs < 0
+    assert np.all(fracs[other] == -2.0) and np.all(status[other] == 7) and np.all(crossed[other] == -2)
+    for d in range(7):
+        mine = dirs == d
+        want = rays.edge_cut_fractions(crossings[d], points[starts[mine]], inside[starts[mine]])
+        for got, expected in zip((fracs[mine], status[mine], crossed[mine]), want):
+            assert np.array_equal(got, expected), d
+    with pytest.raises(ValueError, match="without crossings"):
+        rays.add_edge_cut_fractions({d: crossings[d] for d in range(6)}, points, starts, inside, dirs, fracs, status,
+                                    crossed)
+
+
 def _row_sums_reference(crossings, points):
     """Slow twin of winding_numbers: per point, the signs of the crossings on its row in cells before it."""
     T = row_basis(crossings.direction)

@@ -1908,14 +1908,15 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, edges: tuple, inside, cro
         report.unresolved_cuts += int(unresolved.sum())
     near = None
     status = np.zeros(starts.shape[0], dtype=np.int8)
+    rows_of = {}  # the crossings read here: every row, or near the unit edges only (not kept)
     per_direction = _direction_counts(dirs, EDGE_DIRECTIONS.shape[0])
     for d in range(EDGE_DIRECTIONS.shape[0]):
         if per_direction[d] == 0:
             continue
         if d in crossings:
-            rows = crossings[d]
+            rows_of[d] = crossings[d]
         elif other.size == 0:
-            rows = crossings[d] = rays.row_crossings(frame, snapped, faces, d)
+            rows_of[d] = crossings[d] = rays.row_crossings(frame, snapped, faces, d)
         else:
             # A band that changes level: its unit edges lie in its finest leaves, often a small
             # part of the surface, so only the triangles of the coarse cells holding them are
@@ -1923,8 +1924,8 @@ def cut_edges(frame: FatFrame, snapped, faces, coords, edges: tuple, inside, cro
             if near is None:
                 assert buckets is not None  # checked above, as other.size > 0
                 near = np.flatnonzero(_faces_near_unit_edges(frame, buckets, coords, starts, ends, dirs, faces.shape[0]))
-            rows = rays.row_crossings(frame, snapped, faces, d, near)
-        rays.add_edge_cut_fractions(rows, coords, starts, inside, dirs, fracs, status, crossed)
+            rows_of[d] = rays.row_crossings(frame, snapped, faces, d, near)
+    rays.add_edge_cut_fractions(rows_of, coords, starts, inside, dirs, fracs, status, crossed)
     report.unresolved_cuts += int(status.sum())
     points = _cut_points(coords, starts, ends, fracs, np.ascontiguousarray(frame.origin, dtype=np.float64),
                          float(frame.h), LATTICE_TO_SPACE)

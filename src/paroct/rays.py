@@ -598,38 +598,82 @@ def _row_span(keys, row_box, row_starts, key, hint):
     return np.int64(row_starts[r]), np.int64(row_starts[r + 1])
 
 
+#: Edges a thread takes at a time in _edge_cuts: their outputs and start points stay in its
+#: cache while the seven directions' crossings are looked up.
+EDGE_BLOCK = 1024
+
+
 @nb.njit(cache=True, parallel=True)
-def _edge_cuts(keys, row_box, row_starts, fracs, crossed, basis, points, starts, start_inside, dirs, direction, out,
+def _edge_cuts(keys, fracs, crossed, row_starts, row_boxes, bases, present, points, starts, start_inside, dirs, out,
                status, out_faces):
-    """For each edge e with dirs[e] == direction, from points[starts[e]] one step along the
-    direction: out[e] = the crossing in its cell nearest the inside end, else a crossing
-    exactly at its far end (fraction 1), else the midpoint with status[e] = 1; out_faces[e]
-    = the triangle crossed there (crossed: the crossings' triangles), -1 at a midpoint.
-    Other edges are left alone (the caller's arrays serve every direction: no gathers, no
-    scatter)."""
+    """For each edge e with dirs[e] >= 0, from points[starts[e]] one step along direction
+    dirs[e]: out[e] = the crossing in its cell nearest the inside end, else a crossing exactly
+    at its far end (fraction 1), else the midpoint with status[e] = 1; out_faces[e] = the
+    triangle crossed there, -1 at a midpoint.  keys, fracs, crossed (the crossings'
+    triangles), row_starts: tuples over the directions of their RowCrossings' arrays;
+    row_boxes (D, 3) and bases (D, 3, 3) theirs stacked; present (D,): which directions have
+    crossings.  Edges of dirs -1 are left alone.  Returns the number of edges whose direction
+    has none (those are left alone too).
+
+    The edges go in blocks of EDGE_BLOCK, each block direction by direction.  A pass a
+    direction over all edges, as before, wrote each edge's outputs a cache line apart from
+    the last and read the start points from memory seven times: featuretype's 60 k cut edges
+    at diag/80 took 6.0 ms that way, 3.2 ms in blocks (2 threads; same outputs)."""
     m = starts.shape[0]
-    n_chunks = min(m // 256 + 1, 64)
-    for chunk in nb.prange(n_chunks):
-        first = 0
-        for e in range(chunk * m // n_chunks, (chunk + 1) * m // n_chunks):
-            if dirs[e] != direction:
-                continue
-            key = _point_key(basis, points, starts[e])
-            first, end = _row_span(keys, row_box, row_starts, key, first)
-            lo = lower_bound(keys, key, first, end)
-            hi = lower_bound(keys, key + 1, lo, end)  # keys are integers: key + 1 is cell t + 1
-            status[e] = 0
-            if hi > lo:
-                at = lo if start_inside[starts[e]] else hi - 1
-                out[e] = fracs[at]
-                out_faces[e] = crossed[at]
-            elif hi < end and keys[hi] == key + 1 and fracs[hi] == 0.0:
-                out[e] = 1.0
-                out_faces[e] = crossed[hi]
-            else:
-                out[e] = 0.5
-                out_faces[e] = -1
-                status[e] = 1
+    n_directions = bases.shape[0]
+    n_blocks = (m + EDGE_BLOCK - 1) // EDGE_BLOCK
+    absent = np.zeros(n_blocks, dtype=np.int64)
+    for block in nb.prange(n_blocks):
+        lo, hi = block * EDGE_BLOCK, min(m, (block + 1) * EDGE_BLOCK)
+        # The block's edges grouped by direction, in order (a counting sort).
+        at = np.zeros(n_directions + 1, dtype=np.int64)
+        for e in range(lo, hi):
+            if dirs[e] >= 0:
+                at[dirs[e] + 1] += 1
+        for d in range(n_directions):
+            if not present[d]:
+                absent[block] += at[d + 1]
+                at[d + 1] = 0
+        for d in range(n_directions):
+            at[d + 1] += at[d]
+        ends = at[1:].copy()
+        grouped = np.empty(hi - lo, dtype=np.int64)
+        for e in range(lo, hi):
+            if dirs[e] >= 0 and present[dirs[e]]:
+                grouped[at[dirs[e]]] = e
+                at[dirs[e]] += 1
+        first_of = 0
+        for d in range(n_directions):
+            if ends[d] > first_of:
+                _cut_edges_of_direction(keys[d], fracs[d], crossed[d], row_starts[d], row_boxes[d], bases[d],
+                                        points, starts, start_inside, grouped[first_of:ends[d]], out, status,
+                                        out_faces)
+            first_of = ends[d]
+    return absent.sum()
+
+
+@nb.njit(cache=True, inline="always")
+def _cut_edges_of_direction(keys, fracs, crossed, row_starts, row_box, basis, points, starts, start_inside, edges,
+                            out, status, out_faces):
+    """_edge_cuts for the edges ``edges`` of one direction, its crossings' arrays given."""
+    first = 0
+    for e in edges:
+        key = _point_key(basis, points, starts[e])
+        first, end = _row_span(keys, row_box, row_starts, key, first)
+        lo = lower_bound(keys, key, first, end)
+        hi = lower_bound(keys, key + 1, lo, end)  # keys are integers: key + 1 is cell t + 1
+        status[e] = 0
+        if hi > lo:
+            at = lo if start_inside[starts[e]] else hi - 1
+            out[e] = fracs[at]
+            out_faces[e] = crossed[at]
+        elif hi < end and keys[hi] == key + 1 and fracs[hi] == 0.0:
+            out[e] = 1.0
+            out_faces[e] = crossed[hi]
+        else:
+            out[e] = 0.5
+            out_faces[e] = -1
+            status[e] = 1
 
 
 def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray,
@@ -647,20 +691,32 @@ def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray,
     out = np.empty(starts.shape[0], dtype=np.float64)
     status = np.empty(starts.shape[0], dtype=np.int8)
     faces = np.empty(starts.shape[0], dtype=np.int32)
-    add_edge_cut_fractions(crossings, starts, np.arange(starts.shape[0]), start_inside,
-                           np.full(starts.shape[0], crossings.direction), out, status, faces)
+    add_edge_cut_fractions({crossings.direction: crossings}, starts, np.arange(starts.shape[0]), start_inside,
+                           np.full(starts.shape[0], crossings.direction, dtype=np.int8), out, status, faces)
     return out, status, faces
 
 
-def add_edge_cut_fractions(crossings: RowCrossings, points: np.ndarray, starts: np.ndarray, inside: np.ndarray,
+def add_edge_cut_fractions(crossings: dict, points: np.ndarray, starts: np.ndarray, inside: np.ndarray,
                            dirs: np.ndarray, fracs: np.ndarray, status: np.ndarray, faces: np.ndarray) -> None:
-    """edge_cut_fractions of the edges e whose dirs[e] is the crossings' direction, written to
-    fracs[e], status[e] and faces[e] in place: the edges start at points[starts[e]] (points
-    (N, 3) int64 lattice points, inside (N,) their classes); other edges are left alone."""
-    _edge_cuts(crossings.keys, crossings.row_box, crossings.row_starts, crossings.fracs, crossings.faces,
-               row_basis(crossings.direction), points, np.ascontiguousarray(starts, dtype=np.int64),
-               np.ascontiguousarray(inside, dtype=np.bool_), np.ascontiguousarray(dirs, dtype=np.int8),
-               crossings.direction, fracs, status, faces)
+    """edge_cut_fractions of the edges e with dirs[e] >= 0, each along its direction, written
+    to fracs[e], status[e] and faces[e] in place: edge e starts at points[starts[e]] (points
+    (N, 3) int64 lattice points, inside (N,) their classes); crossings: {direction:
+    RowCrossings} holding every direction of dirs; edges of dirs -1 are left alone."""
+    n_directions = EDGE_DIRECTIONS.shape[0]
+    none = RowCrossings(-1, np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.int8),
+                        np.empty(0, dtype=np.int32), np.array([0, 0, 1], dtype=np.int64), np.empty(0, dtype=np.int32))
+    rows = [crossings.get(d, none) for d in range(n_directions)]
+    present = np.array([d in crossings for d in range(n_directions)])
+    absent = _edge_cuts(tuple(r.keys for r in rows), tuple(r.fracs for r in rows), tuple(r.faces for r in rows),
+                        tuple(r.row_starts for r in rows), np.stack([r.row_box for r in rows]), ROW_BASES, present,
+                        points, np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(inside, dtype=np.bool_),
+                        np.ascontiguousarray(dirs, dtype=np.int8), fracs, status, faces)
+    if absent:
+        raise ValueError(f"{absent} edges lie along directions without crossings (given: {sorted(crossings)})")
+
+
+#: row_basis of every edge direction, stacked (D, 3, 3).
+ROW_BASES = np.stack([row_basis(d) for d in range(EDGE_DIRECTIONS.shape[0])])
 
 
 @nb.njit(cache=True, inline="always")
