@@ -6,7 +6,7 @@ import numba
 import numpy as np
 import pytest
 
-from paroct import mesher, octant, octree
+from paroct import band, mesher, octant, octree
 from paroct.band import FineSurfaceCells, band_cells, band_levels, merge_band_levels
 from paroct.check import check_mesh, distances_to_triangles
 from paroct.frame import EDGE_DIRECTIONS, X_AXIS_DIRECTION, fat_frame
@@ -39,8 +39,11 @@ def _cells(keys, frame, level):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_band_levels_ask_the_finest_level_in_each_ring(seed):
-    """band_levels and merge_band_levels against a dict of cell -> finest level asked."""
+@pytest.mark.parametrize("cells_per_ask", [0, 10**6])
+def test_band_levels_ask_the_finest_level_in_each_ring(seed, cells_per_ask, monkeypatch):
+    """band_levels and merge_band_levels against a dict of cell -> finest level asked, the
+    finest per cell found by a sort (cells_per_ask 0) and through a map of every cell."""
+    monkeypatch.setattr(band, "FINEST_MAP_CELLS_PER_ASK", cells_per_ask)
     rng = np.random.default_rng(seed)
     frame = fat_frame(np.zeros(3), np.ones(3), 1 / 24)
     coarse = frame.levels - 2
