@@ -696,7 +696,7 @@ def edge_cut_fractions(crossings: RowCrossings, starts: np.ndarray,
     return out, status, faces
 
 
-def add_edge_cut_fractions(crossings: dict, points: np.ndarray, starts: np.ndarray, inside: np.ndarray,
+def add_edge_cut_fractions(crossings: dict[int, RowCrossings], points: np.ndarray, starts: np.ndarray, inside: np.ndarray,
                            dirs: np.ndarray, fracs: np.ndarray, status: np.ndarray, faces: np.ndarray) -> None:
     """edge_cut_fractions of the edges e with dirs[e] >= 0, each along its direction, written
     to fracs[e], status[e] and faces[e] in place: edge e starts at points[starts[e]] (points
@@ -707,8 +707,13 @@ def add_edge_cut_fractions(crossings: dict, points: np.ndarray, starts: np.ndarr
                         np.empty(0, dtype=np.int32), np.array([0, 0, 1], dtype=np.int64), np.empty(0, dtype=np.int32))
     rows = [crossings.get(d, none) for d in range(n_directions)]
     present = np.array([d in crossings for d in range(n_directions)])
-    absent = _edge_cuts(tuple(r.keys for r in rows), tuple(r.fracs for r in rows), tuple(r.faces for r in rows),
-                        tuple(r.row_starts for r in rows), np.stack([r.row_box for r in rows]), ROW_BASES, present,
+
+    def each(name: str, dtype) -> tuple:
+        # One array type over the directions: the kernel indexes the tuple by direction.
+        return tuple(np.ascontiguousarray(getattr(r, name), dtype=dtype) for r in rows)
+
+    absent = _edge_cuts(each("keys", np.int64), each("fracs", np.float64), each("faces", np.int32),
+                        each("row_starts", np.int32), np.stack([r.row_box for r in rows]), ROW_BASES, present,
                         points, np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(inside, dtype=np.bool_),
                         np.ascontiguousarray(dirs, dtype=np.int8), fracs, status, faces)
     if absent:
