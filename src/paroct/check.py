@@ -299,24 +299,26 @@ def long_triangle_centres(vertices, faces, min_edge):
     return ids, out
 
 
+@nb.njit(cache=True, inline="always")
+def _edge_turn(points, p, q, n_p, n_q):
+    """(n_q - n_p) . (q - p): how far the surface's normal turns along edge p -> q."""
+    return ((n_q[0] - n_p[0]) * (points[q, 0] - points[p, 0]) + (n_q[1] - n_p[1]) * (points[q, 1] - points[p, 1])
+            + (n_q[2] - n_p[2]) * (points[q, 2] - points[p, 2]))
+
+
 @nb.njit(cache=True, parallel=True)
 def _chord_volumes(points, faces, point_faces, vertices, surface_faces, out):
     for f in nb.prange(faces.shape[0]):
         out[f] = 0.0
         if point_faces[faces[f, 0]] < 0 or point_faces[faces[f, 1]] < 0 or point_faces[faces[f, 2]] < 0:
             continue
-        normals = np.empty((3, 3))  # the unit normal under each vertex, each found once
-        for j in range(3):
-            normals[j, 0], normals[j, 1], normals[j, 2] = triangle_normal(vertices, surface_faces,
-                                                                          point_faces[faces[f, j]])
-        turn = 0.0
-        for j in range(3):
-            k = (j + 1) % 3
-            p, q = faces[f, j], faces[f, k]
-            turn += ((normals[k, 0] - normals[j, 0]) * (points[q, 0] - points[p, 0])
-                     + (normals[k, 1] - normals[j, 1]) * (points[q, 1] - points[p, 1])
-                     + (normals[k, 2] - normals[j, 2]) * (points[q, 2] - points[p, 2]))
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        # The unit normal under each vertex, each found once (in registers: no array a face).
+        n_a = triangle_normal(vertices, surface_faces, point_faces[a])
+        n_b = triangle_normal(vertices, surface_faces, point_faces[b])
+        n_c = triangle_normal(vertices, surface_faces, point_faces[c])
+        turn = (_edge_turn(points, a, b, n_a, n_b) + _edge_turn(points, b, c, n_b, n_c)
+                + _edge_turn(points, c, a, n_c, n_a))
         ux, uy, uz = points[b, 0] - points[a, 0], points[b, 1] - points[a, 1], points[b, 2] - points[a, 2]
         vx, vy, vz = points[c, 0] - points[a, 0], points[c, 1] - points[a, 1], points[c, 2] - points[a, 2]
         area = 0.5 * math.sqrt((uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2 + (ux * vy - uy * vx) ** 2)
